@@ -1,0 +1,43 @@
+#pragma once
+// The sample stage: a scene's fluid shapes become lattice particles and its solids become boundary particles.
+
+#include "kernels.h"
+#include "particles.h"
+#include "scene.h"
+
+#include <string>
+#include <vector>
+
+namespace ganache {
+
+/// Initial density of the sample relative to each particle's rest density (rho / rho_0 - 1).
+struct DensityCheck {
+    Real maxCompression = 0;  ///< largest positive value: a compressed start pushes particles apart
+    Real meanInterior = 0;    ///< mean over particles with a full neighbourhood (no free surface nearby)
+    std::size_t interiorCount = 0;
+};
+
+struct Sample {
+    ParticleSet fluid;
+    std::vector<BoundaryBody> boundaries;
+    std::vector<std::size_t> fluidCounts;  ///< particles per scene fluid, in scene order
+    std::size_t carved = 0;                ///< lattice sites dropped because an earlier fluid holds them
+    DensityCheck density;
+};
+
+/// Samples every fluid of the scene on a lattice of spacing 2r (r = scene.particleRadius) and every boundary
+/// on a surface grid of spacing <= r. Particle masses make the interior of the lattice exactly rest density.
+Sample sampleScene(const Scene& scene);
+
+/// Mass that gives a particle of an infinite lattice of this spacing the density rho0 with kernel w.
+Real latticeMass(Real spacing, Real rho0, const CubicSpline& w);
+
+/// Boundary volumes V_k = 1 / sum_l W(x_k - x_l) over one body's particles (Akinci et al. 2012, Eq. 4).
+std::vector<Real> boundaryVolumes(const std::vector<Vec3>& x, const CubicSpline& w);
+
+/// Densities of the fluid particles from the fluid and boundary neighbours, relative to rest: rho_i / rho0_i - 1.
+/// rho0_i of each particle comes from its mass and the lattice (all fluids share one lattice spacing).
+DensityCheck checkDensity(const ParticleSet& fluid, const std::vector<Real>& restDensity,
+                          const std::vector<BoundaryBody>& boundaries, const CubicSpline& w);
+
+}  // namespace ganache

@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Installs the Debian packages ganache needs (only those missing) and builds it into build/ (Release).
+# Sourced by scripts/run.sh and scripts/test.sh; safe to run again: installed packages and the build are reused.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+
+packages=(
+  cmake g++ make pkg-config ccache
+  libeigen3-dev libtbb-dev libopenvdb-dev libboost-dev libboost-iostreams-dev libassimp-dev libosmesa6-dev libyaml-cpp-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev libfmt-dev nlohmann-json3-dev libpng-dev
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}\n' "$p" 2>/dev/null | grep -q '^install ok installed$' || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "setup: installing ${missing[*]}" >&2
+  if [ "$(id -u)" -ne 0 ]; then
+    echo "setup: installing packages needs root; run as root or install: ${missing[*]}" >&2
+    exit 1
+  fi
+  apt-get update -q
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"
+fi
+
+cmake -S . -B build -DCMAKE_BUILD_TYPE=Release
+cmake --build build --parallel "$(nproc)"

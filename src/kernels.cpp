@@ -1,0 +1,15 @@
+#include "kernels.h"
+
+#include <stdexcept>
+
+namespace ganache {
+
+CubicSpline::CubicSpline(Real supportRadius) : m_h(supportRadius) {
+    if (!(supportRadius > 0) || !std::isfinite(supportRadius))
+        throw std::invalid_argument("CubicSpline: support radius must be positive and finite");
+    const Real h3 = m_h * m_h * m_h;
+    m_k = Real(8) / (Real(M_PI) * h3);
+    m_l = Real(48) / (Real(M_PI) * h3);
+}
+
+}  // namespace ganache

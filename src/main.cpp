@@ -1,0 +1,79 @@
+// ganache: the command line. Parses arguments, calls the pipeline, maps errors to exit codes:
+// 0 success, 2 bad input, 1 run-time failure.
+
+#include "errors.h"
+#include "pipeline.h"
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+
+#include <cstdio>
+
+int main(int argc, char** argv) {
+    using namespace ganache;
+    CLI::App app{"ganache: offline simulation of highly viscous and melting fluids.\n"
+                 "Stages: sample -> simulate -> surface -> render; `run` does every stage the scene asks for."};
+    app.require_subcommand(1);
+    RunOptions opt;
+
+    auto addSceneArgs = [&](CLI::App* c) {
+        c->add_option("scene", opt.scene, "scene file (YAML, `ganache: 1`; see scenes/README.md)")->required();
+        c->add_option("--quality", opt.quality,
+                      "preview (default: particle radius x the scene's preview_scale), final (the scene's radius), "
+                      "or a number that multiplies the radius");
+    };
+    auto addRunArgs = [&](CLI::App* c) {
+        addSceneArgs(c);
+        c->add_option("--out", opt.out, "output folder (default: out/<scene name>)");
+        c->add_option("--frames", opt.frames, "frame range A-B (or one frame A) within the scene's frames");
+        c->add_option("--threads", opt.threads, "worker threads (default 0: every core)");
+        c->add_flag("--resume", opt.resume, "continue from the newest checkpoint (checkpoints arrive with issue 9)");
+        c->add_flag("--force", opt.force, "redo outputs that are up to date");
+    };
+
+    struct Command {
+        const char* name;
+        const char* help;
+        std::vector<StageId> stages;
+    };
+    const std::vector<Command> commands = {
+        {"run", "run every stage the scene asks for, in order", {StageId::Sample, StageId::Simulate}},
+        {"sample", "turn the scene's shapes into fluid and boundary particles (writes sample/<scene>.vdb)",
+         {StageId::Sample}},
+        {"simulate", "simulate from the sample, writing particles/<scene>.NNNN.vdb", {StageId::Simulate}},
+        {"surface", "turn particle caches into level sets and meshes", {StageId::Surface}},
+        {"render", "render preview images of the meshes or particles", {StageId::Render}},
+    };
+    std::vector<CLI::App*> subs;
+    for (const auto& c : commands) {
+        subs.push_back(app.add_subcommand(c.name, c.help));
+        addRunArgs(subs.back());
+    }
+    bool explain = false;
+    CLI::App* sceneCmd = app.add_subcommand("scene", "validate a scene file; --explain prints it with defaults filled in");
+    addSceneArgs(sceneCmd);
+    sceneCmd->add_flag("--explain", explain, "print the effective scene (every value, defaults included, with units)");
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        const int code = app.exit(e);
+        return code == 0 ? 0 : 2;
+    }
+
+    try {
+        if (sceneCmd->parsed()) {
+            sceneCommand(opt, explain);
+            return 0;
+        }
+        for (std::size_t i = 0; i < commands.size(); ++i)
+            if (subs[i]->parsed()) runCommand(opt, commands[i].stages);
+        return 0;
+    } catch (const InputError& e) {
+        fmt::print(stderr, "error: {}\n", e.what());
+        return 2;
+    } catch (const std::exception& e) {
+        fmt::print(stderr, "error: {}\n", e.what());
+        return 1;
+    }
+}

@@ -1,0 +1,146 @@
+#include "pipeline.h"
+
+#include "cache.h"
+#include "errors.h"
+#include "progress.h"
+#include "report.h"
+#include "sampler.h"
+
+#include <fmt/format.h>
+#include <tbb/global_control.h>
+#include <tbb/info.h>
+
+#include <cstdio>
+#include <memory>
+
+namespace ganache {
+
+namespace {
+
+const char* stageName(StageId s) {
+    switch (s) {
+    case StageId::Sample: return "sample";
+    case StageId::Simulate: return "simulate";
+    case StageId::Surface: return "surface";
+    case StageId::Render: return "render";
+    }
+    return "?";
+}
+
+// Stages this build does not have yet, and the issue that brings each.
+const char* missingStageNote(StageId s) {
+    switch (s) {
+    case StageId::Simulate: return "the viscous solver is not part of this build yet (issue 3)";
+    case StageId::Surface: return "the surfacer is not part of this build yet (issue 6)";
+    case StageId::Render: return "the preview renderer is not part of this build yet (issue 7)";
+    default: return nullptr;
+    }
+}
+
+void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report) {
+    StageRecord& stage = report.addStage("sample");
+    Stopwatch clock;
+    const Sample sample = sampleScene(scene);
+    std::size_t boundaryCount = 0;
+    for (const auto& b : sample.boundaries) boundaryCount += b.x.size();
+    report.setCounts(sample.fluid.size(), boundaryCount);
+
+    auto& m = report.measurements()["sample"];
+    for (std::size_t f = 0; f < scene.fluids.size(); ++f) m["fluid_particles"][scene.fluids[f].name] = sample.fluidCounts[f];
+    for (const auto& b : sample.boundaries) m["boundary_particles"][b.name] = b.x.size();
+    m["lattice_sites_carved"] = sample.carved;
+    m["initial_density_error"] = {{"max_compression", sample.density.maxCompression},
+                                  {"mean_interior", sample.density.meanInterior},
+                                  {"interior_particles", sample.density.interiorCount}};
+    if (sample.fluid.empty())
+        throw InputError(fmt::format("{}: the fluids hold no lattice site at particle radius {} m\n  fix: make the "
+                                     "fluid shapes larger than one particle diameter or use a finer --quality",
+                                     scene.file.string(), formatNumber(scene.particleRadius)));
+
+    CacheInfo info{scene.name, scene.frames.start, 0.0, scene.frames.fps, scene.particleRadius};
+    writeParticleCache(layout.sample(), sample.fluid, sample.boundaries, info);
+    stage.seconds = clock.seconds();
+    stage.outputs.push_back(layout.sample().string());
+    stage.note = fmt::format("{} fluid + {} boundary particles; initial max compression {:.2g} %",
+                             sample.fluid.size(), boundaryCount, 100 * sample.density.maxCompression);
+}
+
+}  // namespace
+
+std::filesystem::path OutputLayout::particles(std::int64_t frame) const {
+    return root / "particles" / fmt::format("{}.{:04}.vdb", name, frame);
+}
+
+std::pair<std::int64_t, std::int64_t> parseFrameRange(const std::string& text, const FrameRange& scene) {
+    auto bad = [&](const std::string& why) {
+        return InputError(fmt::format("--frames {}: {}\n  fix: give A-B or A within the scene's frames {}-{}", text,
+                                      why, scene.start, scene.end));
+    };
+    std::int64_t a = 0, b = 0;
+    char dash = 0, extra = 0;
+    const int n = std::sscanf(text.c_str(), "%ld%c%ld%c", &a, &dash, &b, &extra);
+    if (n == 1) b = a;
+    else if (n != 3 || dash != '-') throw bad("not a frame range");
+    if (b < a) throw bad("the range ends before it starts");
+    if (a < scene.start || b > scene.end) throw bad("outside the frames the scene defines");
+    return {a, b};
+}
+
+void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
+    const Quality quality = Quality::parse(options.quality);
+    if (options.threads < 0) throw InputError("--threads must be 0 (every core) or a positive number");
+    const Scene scene = loadScene(options.scene, quality);
+    if (!options.frames.empty()) parseFrameRange(options.frames, scene.frames);
+    if (options.resume)
+        throw InputError("--resume: this build writes no checkpoints yet (issue 9), so there is nothing to resume\n"
+                         "  fix: run without --resume");
+
+    const int threads = options.threads > 0 ? options.threads : tbb::info::default_concurrency();
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+    const OutputLayout layout{options.out.empty() ? std::filesystem::path("out") / scene.name : options.out,
+                              scene.name};
+    RunReport report(scene, threads);
+
+    bool stopped = false;
+    for (StageId id : stages) {
+        if (stopped) {
+            report.addStage(stageName(id)) = {stageName(id), "not run", 0, "an earlier stage is not available", {}};
+            continue;
+        }
+        if (const char* missing = missingStageNote(id)) {
+            report.addStage(stageName(id)) = {stageName(id), "not available", 0, missing, {}};
+            if (stages.size() == 1) {
+                report.write(layout.report());
+                throw std::runtime_error(fmt::format("ganache {}: {}", stageName(id), missing));
+            }
+            stopped = true;
+            continue;
+        }
+        runSample(scene, layout, report);
+    }
+    report.write(layout.report());
+    fmt::print(stderr, "{}", report.table());
+    fmt::print(stderr, "outputs in {} (report: {})\n", layout.root.string(), layout.report().string());
+    if (stopped)
+        fmt::print(stderr, "stopped after the stages this build has; the rest are listed as 'not available'\n");
+}
+
+void sceneCommand(const RunOptions& options, bool explain) {
+    const Scene scene = loadScene(options.scene, Quality::parse(options.quality));
+    if (explain) {
+        fmt::print("{}", explainScene(scene));
+        return;
+    }
+    fmt::print("{}: scene '{}' is valid: {} fluid(s), {} boundary(ies), effects: {}; about {:.3g} fluid particles "
+               "at {} quality (r = {} m)\n",
+               scene.file.string(), scene.name, scene.fluids.size(), scene.boundaries.size(),
+               scene.effects.empty() ? std::string("none") : [&] {
+                   std::vector<std::string> names;
+                   for (const auto& e : scene.effects) names.push_back(e.name);
+                   return joinNames(names);
+               }(),
+               estimateFluidParticles(scene, scene.particleRadius), scene.quality.str(),
+               formatNumber(scene.particleRadius));
+}
+
+}  // namespace ganache

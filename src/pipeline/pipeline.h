@@ -1,0 +1,47 @@
+#pragma once
+// The stages of a ganache run and the commands that drive them: sample -> simulate -> surface -> render.
+// Each stage reads the files the previous one wrote, so any stage can be rerun on its own.
+
+#include "scene.h"
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace ganache {
+
+enum class StageId { Sample, Simulate, Surface, Render };
+
+/// Options shared by the commands (the CLI's flags).
+struct RunOptions {
+    std::filesystem::path scene;
+    std::filesystem::path out;                       ///< empty: out/<scene name>
+    std::string frames;                              ///< "A-B" or "A"; empty: the scene's frames
+    int threads = 0;                                 ///< 0: every core
+    std::string quality = "preview";
+    bool resume = false;
+    bool force = false;
+};
+
+/// The inclusive frame range "A-B" (or "A") within the scene's frames; InputError when malformed or outside.
+std::pair<std::int64_t, std::int64_t> parseFrameRange(const std::string& text, const FrameRange& scene);
+
+/// Output locations of a scene: <out>/sample/<name>.vdb, <out>/particles/<name>.NNNN.vdb, <out>/report.json.
+struct OutputLayout {
+    std::filesystem::path root;
+    std::string name;
+    std::filesystem::path sample() const { return root / "sample" / (name + ".vdb"); }
+    std::filesystem::path particles(std::int64_t frame) const;
+    std::filesystem::path report() const { return root / "report.json"; }
+};
+
+/// `ganache run` (every stage the scene asks for) or one stage on its own. Throws InputError for bad input,
+/// std::runtime_error for run-time failures. Progress and the closing table go to stderr.
+void runCommand(const RunOptions& options, const std::vector<StageId>& stages);
+
+/// `ganache scene`: validates the scene; with explain, prints the effective scene to stdout.
+void sceneCommand(const RunOptions& options, bool explain);
+
+}  // namespace ganache

@@ -1,0 +1,275 @@
+#include "scene.h"
+
+#include "checksum.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+namespace ganache {
+
+namespace {
+
+constexpr std::int64_t kSchemaVersion = 1;
+
+std::string hashFile(const std::filesystem::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    return fmt::format("{:016x}", fnv1a64(bytes.data(), bytes.size()));
+}
+
+std::vector<std::string> presetNames() {
+    std::vector<std::string> names;
+    for (const auto& m : materialPresets()) names.push_back(m.name);
+    return names;
+}
+
+// `materials:` maps a user's name to a preset it starts from and the values it changes.
+std::vector<Material> readMaterials(std::optional<Section> section) {
+    std::vector<Material> out;
+    if (!section) return out;
+    for (const std::string& key : section->keys()) {
+        if (findPreset(key))
+            section->failAtKey(key, fmt::format("material '{}' has the name of a built-in preset", key),
+                          "pick another name; presets cannot be redefined");
+        Section m = *section->child(key);
+        const std::string base = m.choice("base", "water", presetNames());
+        Material mat = *findPreset(base);
+        mat.name = key;
+        mat.density = m.positive("density", mat.density, "kg/m^3");
+        mat.mu = m.number("mu", mat.mu, "Pa s", Bounds::nonNegative());
+        mat.source = "user material based on " + base;
+        m.rejectUnused();
+        out.push_back(mat);
+    }
+    section->rejectUnused();
+    return out;
+}
+
+Material findMaterial(Section& fluid, const std::vector<Material>& custom) {
+    std::vector<std::string> names = presetNames();
+    for (const auto& m : custom) names.push_back(m.name);
+    const std::string name = fluid.choice("material", "water", names);
+    for (const auto& m : custom)
+        if (m.name == name) return m;
+    return *findPreset(name);
+}
+
+void requireOrdered(Section& s, const Vec3& min, const Vec3& max, const std::string& what) {
+    for (int a = 0; a < 3; ++a)
+        if (!(min[a] < max[a]))
+            s.fail("max", fmt::format("{}: max must exceed min on every axis (axis {}: min {}, max {})", what,
+                                      "xyz"[a], formatNumber(min[a]), formatNumber(max[a])),
+                   "swap the corners or give the box a non-zero size");
+}
+
+BoxShape readBox(Section s) {
+    BoxShape b;
+    b.min = s.vec3("min", std::nullopt, "m");
+    b.max = s.vec3("max", std::nullopt, "m");
+    requireOrdered(s, b.min, b.max, s.path());
+    s.rejectUnused();
+    return b;
+}
+
+// Exactly one of the shape keys must be present.
+std::string pickShape(Section& s, const std::vector<std::string>& shapes) {
+    std::string found;
+    for (const auto& k : shapes)
+        if (s.has(k)) {
+            if (!found.empty())
+                s.fail(k, fmt::format("{} has both '{}' and '{}'", s.path(), found, k), "give exactly one shape");
+            found = k;
+        }
+    if (found.empty())
+        s.fail("", fmt::format("{} has no shape", s.path()),
+               fmt::format("add one of: {}", joinNames(shapes)) + ", e.g. `box: {min: [0, 0, 0], max: [1, 1, 1]}`");
+    return found;
+}
+
+FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& custom) {
+    FluidSpec f;
+    f.at = s.where();
+    f.name = s.name("name", fmt::format("fluid{}", index));
+    f.material = findMaterial(s, custom);
+    f.velocity = s.vec3("velocity", f.velocity, "m/s");
+    if (pickShape(s, {"box", "sphere"}) == "box") {
+        f.shape = readBox(*s.child("box"));
+    } else {
+        Section sp = *s.child("sphere");
+        SphereShape sh;
+        sh.centre = sp.vec3("centre", std::nullopt, "m");
+        sh.radius = sp.positive("radius", std::nullopt, "m");
+        sp.rejectUnused();
+        f.shape = sh;
+    }
+    s.rejectUnused();
+    return f;
+}
+
+BoundarySpec readBoundary(Section s, std::size_t index) {
+    BoundarySpec b;
+    b.at = s.where();
+    b.name = s.name("name", fmt::format("boundary{}", index));
+    if (pickShape(s, {"box", "plane"}) == "box") {
+        Section bs = *s.child("box");
+        BoxBoundary box;
+        box.min = bs.vec3("min", std::nullopt, "m");
+        box.max = bs.vec3("max", std::nullopt, "m");
+        requireOrdered(bs, box.min, box.max, bs.path());
+        box.openTop = bs.boolean("open_top", box.openTop);
+        bs.rejectUnused();
+        b.shape = box;
+    } else {
+        Section ps = *s.child("plane");
+        PlaneBoundary plane;
+        plane.point = ps.vec3("point", plane.point, "m");
+        const Vec3 n = ps.vec3("normal", plane.normal, "unit vector");
+        if (n.norm() < 1e-12)
+            ps.fail("normal", ps.path() + ".normal must not be the zero vector", "e.g. `normal: [0, 1, 0]` for a floor");
+        plane.normal = n.normalized();
+        ps.rejectUnused();
+        b.shape = plane;
+    }
+    s.rejectUnused();
+    return b;
+}
+
+std::pair<Vec3, Vec3> boundsOf(const FluidShape& shape) {
+    if (auto* b = std::get_if<BoxShape>(&shape)) return {b->min, b->max};
+    const auto& s = std::get<SphereShape>(shape);
+    return {s.centre.array() - s.radius, s.centre.array() + s.radius};
+}
+
+}  // namespace
+
+Quality Quality::parse(const std::string& text) {
+    if (text == "preview" || text == "final") return {text, 0};
+    char* end = nullptr;
+    const Real v = std::strtod(text.c_str(), &end);
+    if (!text.empty() && end && *end == '\0' && std::isfinite(v) && v > 0) return {"number", v};
+    throw InputError(fmt::format("--quality: expected preview, final or a positive number (got '{}')\n"
+                                 "  fix: e.g. --quality preview, --quality final or --quality 1.5 "
+                                 "(multiplies the particle radius)",
+                                 text));
+}
+
+std::string Quality::str() const { return label == "number" ? formatNumber(scale) : label; }
+
+const EffectSpec* Scene::findEffect(const std::string& effectName) const {
+    for (const auto& e : effects)
+        if (e.name == effectName) return &e;
+    return nullptr;
+}
+
+Real estimateFluidParticles(const Scene& scene, Real radius) {
+    const Real cell = std::pow(2 * radius, 3);
+    Real n = 0;
+    for (const auto& f : scene.fluids) {
+        if (auto* b = std::get_if<BoxShape>(&f.shape)) n += (b->max - b->min).prod() / cell;
+        else n += 4.0 / 3.0 * M_PI * std::pow(std::get<SphereShape>(f.shape).radius, 3) / cell;
+    }
+    return n;
+}
+
+Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
+    auto effective = std::make_shared<EffectiveScene>();
+    Section root = openSceneFile(file, effective);
+    Scene scene;
+    scene.file = file;
+    scene.hash = hashFile(file);
+    scene.quality = quality;
+
+    if (!root.has("ganache"))
+        root.failMissing("ganache", "the scene has no schema version",
+                  fmt::format("add `ganache: {}` as the first line", kSchemaVersion));
+    const std::int64_t version = root.integer("ganache", std::nullopt, 0, 1'000'000);
+    if (version != kSchemaVersion)
+        root.fail("ganache", fmt::format("schema version {} is not supported; this ganache reads version {}", version,
+                                         kSchemaVersion),
+                  fmt::format("write `ganache: {}` and check scenes/README.md for the keys of that version",
+                              kSchemaVersion));
+
+    const std::string stem = file.stem().string();
+    const bool stemIsName = !stem.empty() && std::all_of(stem.begin(), stem.end(), [](unsigned char c) {
+        return std::isalnum(c) || c == '_' || c == '-';
+    });
+    scene.name = root.name("name", stemIsName ? std::optional<std::string>(stem) : std::nullopt);
+
+    {
+        Section fr = root.section("frames");
+        scene.frames.fps = fr.positive("fps", scene.frames.fps, "frames/s");
+        scene.frames.start = fr.integer("start", scene.frames.start, 0, 9999);
+        scene.frames.end = fr.integer("end", scene.frames.end, 0, 9999);
+        if (scene.frames.end < scene.frames.start)
+            fr.fail("end", fmt::format("frames.end ({}) comes before frames.start ({})", scene.frames.end,
+                                        scene.frames.start),
+                     "make end at least start");
+        fr.rejectUnused();
+    }
+
+    Section particles = root.require("particles", "particles: {radius: 0.01}");
+    scene.radiusAt = particles.where("radius");
+    scene.finalRadius = particles.positive("radius", std::nullopt, "m");
+    scene.previewScale = particles.number("preview_scale", scene.previewScale, "x radius", Bounds{1, 100});
+    scene.maxParticles = particles.integer("max_count", scene.maxParticles, 1, 2'000'000'000);
+    particles.rejectUnused();
+    scene.particleRadius = scene.finalRadius * (quality.label == "preview" ? scene.previewScale
+                                                : quality.label == "final" ? 1 : quality.scale);
+
+    Section domain = root.require("domain", "domain: {min: [-1, -1, -1], max: [1, 1, 1]}");
+    scene.domainMin = domain.vec3("min", std::nullopt, "m");
+    scene.domainMax = domain.vec3("max", std::nullopt, "m");
+    requireOrdered(domain, scene.domainMin, scene.domainMax, "domain");
+    domain.rejectUnused();
+
+    const std::vector<Material> custom = readMaterials(root.child("materials"));
+    auto fluids = root.list("fluids");
+    if (fluids.empty())
+        root.fail("fluids", "the scene has no fluid", "add `fluids:` with at least one entry, e.g. "
+                                                      "`- {name: block, box: {min: [0, 0, 0], max: [0.1, 0.1, 0.1]}}`");
+    for (std::size_t i = 0; i < fluids.size(); ++i) {
+        scene.fluids.push_back(readFluid(fluids[i], i, custom));
+        const auto [lo, hi] = boundsOf(scene.fluids.back().shape);
+        if ((lo.array() < scene.domainMin.array()).any() || (hi.array() > scene.domainMax.array()).any())
+            throw SceneError(scene.fluids.back().at,
+                             fmt::format("fluid '{}' reaches outside the domain", scene.fluids.back().name),
+                             "enlarge domain.min/max or move the fluid inside it");
+    }
+    auto boundaries = root.list("boundaries");
+    for (std::size_t i = 0; i < boundaries.size(); ++i) scene.boundaries.push_back(readBoundary(boundaries[i], i));
+
+    if (auto eff = root.child("effects")) scene.effects = readEffects(*eff);
+    root.rejectUnused();
+
+    const Real estimate = estimateFluidParticles(scene, scene.particleRadius);
+    if (estimate > Real(scene.maxParticles)) {
+        const Real fits = scene.particleRadius * std::cbrt(estimate / Real(scene.maxParticles));
+        throw SceneError(scene.radiusAt,
+                         fmt::format("a particle radius of {} m ({} quality) gives about {:.3g} fluid particles, "
+                                     "above particles.max_count = {}",
+                                     formatNumber(scene.particleRadius), quality.str(), estimate, scene.maxParticles),
+                         fmt::format("use a radius of at least {:.3g} m at this quality (or a coarser --quality), or "
+                                     "raise particles.max_count if the machine has the memory",
+                                     fits));
+    }
+    scene.effective = effective;
+    return scene;
+}
+
+std::string explainScene(const Scene& scene) {
+    std::string header = fmt::format(
+        "# effective scene '{}' from {} (hash {}), defaults filled in\n"
+        "# quality {}: this run uses particle radius {} m (particles.radius {} m at final quality)\n",
+        scene.name, scene.file.string(), scene.hash, scene.quality.str(), formatNumber(scene.particleRadius),
+        formatNumber(scene.finalRadius));
+    for (const auto& f : scene.fluids)
+        header += fmt::format("# fluid '{}': material {} (density {} kg/m^3, mu {} Pa s; {})\n", f.name,
+                              f.material.name, formatNumber(f.material.density), formatNumber(f.material.mu),
+                              f.material.source);
+    return header + effectiveYaml(*scene.effective);
+}
+
+}  // namespace ganache

@@ -1,0 +1,111 @@
+#pragma once
+// Scenes: YAML files (schema `ganache: 1`, documented in scenes/README.md) read into typed structs.
+// Defaults live in the struct member initialisers below and nowhere else.
+
+#include "effect.h"
+#include "errors.h"
+#include "materials.h"
+#include "scene_section.h"
+#include "types.h"
+
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace ganache {
+
+/// --quality: `preview` scales the particle radius by the scene's preview_scale, `final` uses the scene's
+/// radius, and a number scales the radius by that number (2 = twice the radius, 1/8 of the particles).
+struct Quality {
+    std::string label = "preview";
+    Real scale = 0;  ///< the number given, when label == "number"
+    /// Parses preview | final | <positive number>; throws InputError otherwise.
+    static Quality parse(const std::string& text);
+    std::string str() const;
+};
+
+/// Output frames: frame `start` shows t = 0, frame f shows t = (f - start) / fps.
+struct FrameRange {
+    std::int64_t start = 1;
+    std::int64_t end = 48;
+    Real fps = 24;  ///< frames per second
+    Real timeOf(std::int64_t frame) const { return Real(frame - start) / fps; }
+    std::int64_t count() const { return end - start + 1; }
+};
+
+struct BoxShape {
+    Vec3 min, max;  ///< corners [m]
+};
+struct SphereShape {
+    Vec3 centre;
+    Real radius = 0;  ///< [m]
+};
+using FluidShape = std::variant<BoxShape, SphereShape>;
+
+/// A body of fluid present at t = 0.
+struct FluidSpec {
+    std::string name;
+    Material material;
+    Vec3 velocity = Vec3::Zero();  ///< initial velocity [m/s]
+    FluidShape shape;
+    Location at;
+};
+
+/// The walls of a box (a tank when the fluid is inside, an obstacle when outside); open_top leaves out
+/// the face at max y (y is up).
+struct BoxBoundary {
+    Vec3 min, max;
+    bool openTop = false;
+};
+/// An infinite plane, sampled where it crosses the domain.
+struct PlaneBoundary {
+    Vec3 point = Vec3::Zero();
+    Vec3 normal = Vec3::UnitY();  ///< unit length
+};
+using BoundaryShape = std::variant<BoxBoundary, PlaneBoundary>;
+
+/// A static solid the fluid cannot pass, made of boundary particles (Akinci et al. 2012).
+struct BoundarySpec {
+    std::string name;
+    BoundaryShape shape;
+    Location at;
+};
+
+struct Scene {
+    std::filesystem::path file;
+    std::string name;  ///< output file prefix
+    std::string hash;  ///< FNV-1a 64 of the scene file's bytes, hex
+
+    FrameRange frames;
+
+    Real finalRadius = 0;            ///< particles.radius [m], the radius at final quality
+    Real previewScale = 2;           ///< particles.preview_scale
+    std::int64_t maxParticles = 20'000'000;  ///< particles.max_count: refuse scenes estimated above it
+    Location radiusAt;
+    Quality quality;
+    Real particleRadius = 0;         ///< the radius this run uses [m], after --quality
+
+    Vec3 domainMin, domainMax;       ///< particles leaving this box are removed [m]
+
+    std::vector<FluidSpec> fluids;
+    std::vector<BoundarySpec> boundaries;
+    std::vector<EffectSpec> effects;
+
+    std::shared_ptr<const EffectiveScene> effective;  ///< every value read, defaults included
+
+    const EffectSpec* findEffect(const std::string& name) const;
+};
+
+/// Loads and validates a scene; throws SceneError (file:line:col, what, fix) or InputError.
+Scene loadScene(const std::filesystem::path& file, const Quality& quality);
+
+/// Fluid particles the scene's shapes hold at `radius` on a lattice of spacing 2 radius (an estimate).
+Real estimateFluidParticles(const Scene& scene, Real radius);
+
+/// `ganache scene --explain`: the effective scene as YAML with units and a header naming the quality.
+std::string explainScene(const Scene& scene);
+
+}  // namespace ganache

@@ -1,0 +1,116 @@
+// Runs the real `ganache` program: exit codes, messages, outputs and report.json.
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <sys/wait.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const fs::path kSource = GANACHE_SOURCE_DIR;
+
+struct Result {
+    int code;
+    std::string output;  // stdout and stderr together
+};
+
+Result ganache(const std::string& args) {
+    const std::string cmd = std::string(GANACHE_EXE) + " " + args + " 2>&1";
+    FILE* pipe = popen(cmd.c_str(), "r");
+    std::string out;
+    std::array<char, 4096> buf;
+    while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
+    const int status = pclose(pipe);
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+fs::path freshDir(const std::string& name) {
+    const fs::path d = fs::temp_directory_path() / "ganache_cli_test" / name;
+    fs::remove_all(d);
+    fs::create_directories(d);
+    return d;
+}
+
+const std::string kTiny = (kSource / "tests/scenes/tiny.yaml").string();
+
+}  // namespace
+
+TEST(Cli, HelpForEveryCommand) {
+    EXPECT_EQ(ganache("--help").code, 0);
+    for (const char* c : {"run", "sample", "simulate", "surface", "render", "scene"}) {
+        const Result r = ganache(std::string(c) + " --help");
+        EXPECT_EQ(r.code, 0) << c;
+        EXPECT_NE(r.output.find("--quality"), std::string::npos) << c;
+    }
+    EXPECT_EQ(ganache("").code, 2);  // a command is required
+    EXPECT_EQ(ganache("frobnicate").code, 2);
+}
+
+TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
+    const fs::path out = freshDir("run");
+    const Result r = ganache("run " + kTiny + " --out " + out.string() + " --threads 2");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_TRUE(fs::exists(out / "sample/tiny.vdb"));
+    EXPECT_NE(r.output.find("not available"), std::string::npos) << "the missing solver is said, not faked";
+
+    std::ifstream in(out / "report.json");
+    const auto report = nlohmann::json::parse(in);
+    EXPECT_EQ(report["scene"]["name"], "tiny");
+    EXPECT_EQ(report["threads"], 2);
+    EXPECT_GT(report["particles"]["fluid"].get<int>(), 0);
+    EXPECT_GT(report["particles"]["boundary"].get<int>(), 0);
+    EXPECT_EQ(report["stages"][0]["name"], "sample");
+    EXPECT_EQ(report["stages"][0]["status"], "done");
+    EXPECT_EQ(report["stages"][1]["name"], "simulate");
+    EXPECT_EQ(report["stages"][1]["status"], "not available");
+    EXPECT_EQ(report["effects_requested"][0], "gravity");
+    EXPECT_EQ(report["settings"]["particles"]["radius"], 0.01);
+    EXPECT_GT(report["peak_memory_bytes"].get<double>(), 0);
+    // Nothing half-written stays behind.
+    for (const auto& e : fs::recursive_directory_iterator(out))
+        EXPECT_EQ(e.path().string().find(".tmp-"), std::string::npos) << e.path();
+}
+
+TEST(Cli, MissingStagesSaySoAndFail) {
+    const fs::path out = freshDir("simulate");
+    const Result r = ganache("simulate " + kTiny + " --out " + out.string());
+    EXPECT_EQ(r.code, 1);
+    EXPECT_NE(r.output.find("not part of this build"), std::string::npos) << r.output;
+}
+
+TEST(Cli, BadInputExitsWithTwoAndSaysWhere) {
+    const fs::path broken = kSource / "tests/scenes/broken/negative_radius.yaml";
+    Result r = ganache("run " + broken.string() + " --out " + freshDir("broken").string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find(broken.string() + ":4:21:"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("fix:"), std::string::npos);
+
+    EXPECT_EQ(ganache("run no/such/scene.yaml").code, 2);
+    EXPECT_EQ(ganache("run " + kTiny + " --quality best").code, 2);
+    EXPECT_EQ(ganache("run " + kTiny + " --frames 4-2").code, 2);
+    EXPECT_EQ(ganache("run " + kTiny + " --frames 1-99").code, 2);
+    EXPECT_EQ(ganache("run " + kTiny + " --frames x").code, 2);
+    EXPECT_EQ(ganache("run " + kTiny + " --threads -3").code, 2);
+    r = ganache("run " + kTiny + " --resume --out " + freshDir("resume").string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find("no checkpoints"), std::string::npos) << r.output;
+}
+
+TEST(Cli, SceneExplainPrintsAValidScene) {
+    const Result r = ganache("scene " + kTiny + " --explain");
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("fps: 10"), std::string::npos);
+    EXPECT_NE(r.output.find("acceleration: [0, -9.81, 0]  # m/s^2"), std::string::npos) << r.output;
+    const fs::path again = freshDir("explain") / "again.yaml";
+    std::ofstream(again) << r.output;
+    const Result check = ganache("scene " + again.string());
+    EXPECT_EQ(check.code, 0) << check.output;
+    EXPECT_NE(check.output.find("is valid"), std::string::npos);
+}

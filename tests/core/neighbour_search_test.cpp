@@ -1,0 +1,149 @@
+#include "neighbour_search.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <random>
+#include <set>
+
+using namespace ganache;
+
+namespace {
+
+std::vector<Vec3> randomPoints(std::size_t n, const Vec3& lo, const Vec3& hi, unsigned seed) {
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<Real> u(0, 1);
+    std::vector<Vec3> x(n);
+    for (auto& p : x) p = lo + (hi - lo).cwiseProduct(Vec3(u(rng), u(rng), u(rng)));
+    return x;
+}
+
+std::vector<std::set<std::uint32_t>> bruteForce(const std::vector<Vec3>& q, const std::vector<Vec3>& t, Real radius,
+                                                bool sameSet) {
+    std::vector<std::set<std::uint32_t>> out(q.size());
+    for (std::size_t i = 0; i < q.size(); ++i)
+        for (std::size_t j = 0; j < t.size(); ++j)
+            if ((q[i] - t[j]).squaredNorm() < radius * radius && !(sameSet && i == j)) out[i].insert(std::uint32_t(j));
+    return out;
+}
+
+void expectSameAsBruteForce(const NeighbourList& nl, const std::vector<std::set<std::uint32_t>>& expected) {
+    ASSERT_EQ(nl.particles(), expected.size());
+    for (std::size_t i = 0; i < expected.size(); ++i) {
+        const auto r = nl.of(i);
+        const std::set<std::uint32_t> got(r.begin(), r.end());
+        ASSERT_EQ(got.size(), r.size()) << "duplicate neighbour of " << i;
+        ASSERT_EQ(got, expected[i]) << "particle " << i;
+    }
+}
+
+NeighbourList fluidSearch(const std::vector<Vec3>& x, Real radius) {
+    UniformGrid grid(radius);
+    NeighbourList nl;
+    findFluidNeighbours(grid, x, radius, nl);
+    return nl;
+}
+
+}  // namespace
+
+TEST(NeighbourSearch, MatchesBruteForceOnRandomPoints) {
+    // About 30 neighbours each, with points on both sides of the origin (negative cell coordinates).
+    const auto x = randomPoints(3000, Vec3(-0.3, -0.2, -0.1), Vec3(0.3, 0.25, 0.2), 1);
+    const Real radius = 0.06;
+    expectSameAsBruteForce(fluidSearch(x, radius), bruteForce(x, x, radius, true));
+}
+
+TEST(NeighbourSearch, MatchesBruteForceBetweenTwoSets) {
+    const auto fluid = randomPoints(1500, Vec3(0, 0, 0), Vec3(0.5, 0.5, 0.5), 2);
+    const auto boundary = randomPoints(800, Vec3(-0.1, -0.1, -0.1), Vec3(0.6, 0.1, 0.6), 3);
+    const Real radius = 0.07;
+    UniformGrid fg(radius), bg(radius);
+    fg.build(fluid);
+    bg.build(boundary);
+    NeighbourList nl;
+    findNeighbours(fg, fluid, bg, boundary, radius, false, nl);
+    expectSameAsBruteForce(nl, bruteForce(fluid, boundary, radius, false));
+}
+
+TEST(NeighbourSearch, AllPointsInOneCell) {
+    const auto x = randomPoints(200, Vec3(0.01, 0.01, 0.01), Vec3(0.02, 0.02, 0.02), 4);
+    const NeighbourList nl = fluidSearch(x, 0.05);
+    for (std::size_t i = 0; i < x.size(); ++i) EXPECT_EQ(nl.of(i).size(), x.size() - 1);
+}
+
+TEST(NeighbourSearch, CoincidentPointsAreNeighboursButNotOfThemselves) {
+    const std::vector<Vec3> x(5, Vec3(0.3, -0.2, 0.1));
+    const NeighbourList nl = fluidSearch(x, 0.01);
+    expectSameAsBruteForce(nl, bruteForce(x, x, 0.01, true));
+    EXPECT_EQ(nl.pairs(), 20u);
+}
+
+TEST(NeighbourSearch, VerySparsePointsHaveNoNeighbours) {
+    const auto x = randomPoints(100, Vec3(-500, -500, -500), Vec3(500, 500, 500), 5);
+    const NeighbourList nl = fluidSearch(x, 0.01);
+    EXPECT_EQ(nl.pairs(), 0u);
+    EXPECT_EQ(nl.particles(), 100u);
+}
+
+TEST(NeighbourSearch, EmptyInputs) {
+    const NeighbourList empty = fluidSearch({}, 0.1);
+    EXPECT_EQ(empty.particles(), 0u);
+    // Fluid against an empty boundary: every list empty.
+    const auto fluid = randomPoints(10, Vec3::Zero(), Vec3::Ones(), 6);
+    UniformGrid fg(0.1), bg(0.1);
+    fg.build(fluid);
+    bg.build({});
+    NeighbourList nl;
+    findNeighbours(fg, fluid, bg, {}, 0.1, false, nl);
+    EXPECT_EQ(nl.particles(), 10u);
+    EXPECT_EQ(nl.pairs(), 0u);
+}
+
+TEST(NeighbourSearch, PointsExactlyOnCellFaces) {
+    // Lattice points at multiples of the radius sit on cell boundaries; pairs at exactly the radius are out.
+    std::vector<Vec3> x;
+    for (int k = -2; k <= 2; ++k)
+        for (int j = -2; j <= 2; ++j)
+            for (int i = -2; i <= 2; ++i) x.push_back(Real(0.05) * Vec3(i, j, k));
+    expectSameAsBruteForce(fluidSearch(x, 0.1), bruteForce(x, x, 0.1, true));
+}
+
+TEST(NeighbourSearch, SameListsForAnyThreadCount) {
+    const auto x = randomPoints(20000, Vec3::Zero(), Vec3::Ones(), 7);
+    NeighbourList one, two;
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+        one = fluidSearch(x, 0.04);
+    }
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
+        two = fluidSearch(x, 0.04);
+    }
+    EXPECT_EQ(one.offsets, two.offsets);
+    EXPECT_EQ(one.indices, two.indices);
+}
+
+TEST(NeighbourSearch, SortedOrderIsAPermutationGroupedByCell) {
+    const auto x = randomPoints(5000, Vec3(-1, -1, -1), Vec3(1, 1, 1), 8);
+    UniformGrid grid(0.1);
+    grid.build(x);
+    std::vector<std::uint32_t> perm = grid.sortedIndices();
+    std::vector<std::uint32_t> sorted = perm;
+    std::sort(sorted.begin(), sorted.end());
+    for (std::uint32_t i = 0; i < sorted.size(); ++i) ASSERT_EQ(sorted[i], i);
+    for (std::size_t c = 0; c < grid.cellCount(); ++c) {
+        const auto& cc = grid.cellCoords(c);
+        EXPECT_EQ(grid.findCell(cc[0], cc[1], cc[2]), std::int64_t(c));
+        for (std::size_t s = grid.cellBegin(c); s < grid.cellBegin(c + 1); ++s) {
+            const Vec3 cell = (x[perm[s]] / 0.1).array().floor();
+            EXPECT_EQ(cell, Vec3(cc[0], cc[1], cc[2]));
+        }
+    }
+}
+
+TEST(NeighbourSearch, RejectsNonFiniteAndFarPoints) {
+    UniformGrid grid(0.01);
+    EXPECT_THROW(grid.build({Vec3(0, 0, 0), Vec3(NAN, 0, 0)}), std::runtime_error);
+    EXPECT_THROW(grid.build({Vec3(1e6, 0, 0)}), std::runtime_error);
+}
