@@ -117,11 +117,21 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     };
     tbb::enumerable_thread_specific<std::vector<Candidate>> scratch;
 
-    // Visits every query cell once; `emit(i, j)` sees the neighbours of each of its points in a fixed order.
-    auto forEachPair = [&](auto&& emit) {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, queryGrid.cellCount(), 16), [&](const auto& range) {
-            auto& candidates = scratch.local();
-            for (std::size_t c = range.begin(); c != range.end(); ++c) {
+    // One pass: chunks of query cells write their particles' lists into their own buffers (fixed chunk
+    // boundaries, so the result is the same for any thread count); a second, cheap pass copies each list
+    // to its place in particle order.
+    constexpr std::size_t kCellsPerChunk = 64;
+    const std::size_t cells = queryGrid.cellCount();
+    const std::size_t chunks = (cells + kCellsPerChunk - 1) / kCellsPerChunk;
+    std::vector<std::vector<std::uint32_t>> buffers(chunks);
+    std::vector<std::uint32_t> count(n), chunkOf(n), localStart(n);
+
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const auto& range) {
+        auto& candidates = scratch.local();
+        for (std::size_t chunk = range.begin(); chunk != range.end(); ++chunk) {
+            auto& buffer = buffers[chunk];
+            const std::size_t lastCell = std::min(cells, (chunk + 1) * kCellsPerChunk);
+            for (std::size_t c = chunk * kCellsPerChunk; c < lastCell; ++c) {
                 const auto& cc = queryGrid.cellCoords(c);
                 candidates.clear();
                 for (int dz = -1; dz <= 1; ++dz)
@@ -135,22 +145,24 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
                 for (std::size_t s = queryGrid.cellBegin(c); s < queryGrid.cellBegin(c + 1); ++s) {
                     const std::uint32_t i = qSorted[s];
                     const Vec3 xi = queryX[i];
+                    chunkOf[i] = std::uint32_t(chunk);
+                    localStart[i] = std::uint32_t(buffer.size());
                     for (const Candidate& cand : candidates)
-                        if ((xi - cand.x).squaredNorm() < r2 && !(sameSet && cand.j == i)) emit(i, cand.j);
+                        if ((xi - cand.x).squaredNorm() < r2 && !(sameSet && cand.j == i)) buffer.push_back(cand.j);
+                    count[i] = std::uint32_t(buffer.size() - localStart[i]);
                 }
             }
-        });
-    };
+        }
+    });
 
-    std::vector<std::uint32_t> counts(n, 0);
-    forEachPair([&](std::uint32_t i, std::uint32_t) { ++counts[i]; });
     out.offsets.resize(n + 1);
     out.offsets[0] = 0;
-    for (std::size_t i = 0; i < n; ++i) out.offsets[i + 1] = out.offsets[i] + counts[i];
+    for (std::size_t i = 0; i < n; ++i) out.offsets[i + 1] = out.offsets[i] + count[i];
     out.indices.resize(out.offsets[n]);
-    // counts[i] now serves as the fill cursor of particle i; each particle is written by one task only.
-    std::fill(counts.begin(), counts.end(), 0);
-    forEachPair([&](std::uint32_t i, std::uint32_t j) { out.indices[out.offsets[i] + counts[i]++] = j; });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i)
+            std::copy_n(buffers[chunkOf[i]].data() + localStart[i], count[i], out.indices.data() + out.offsets[i]);
+    });
 }
 
 void findFluidNeighbours(UniformGrid& grid, const std::vector<Vec3>& x, Real radius, NeighbourList& out) {
