@@ -22,19 +22,25 @@ struct Sample {
     std::vector<BoundaryBody> boundaries;
     std::vector<std::size_t> fluidCounts;  ///< particles per scene fluid, in scene order
     std::size_t carved = 0;                ///< lattice sites dropped because an earlier fluid holds them
+    std::size_t carvedByBoundaries = 0;    ///< lattice sites dropped for lying closer than 2r to a boundary
     DensityCheck density;
 };
 
 /// Samples every fluid of the scene on a lattice of spacing 2r (r = scene.particleRadius) and every boundary
 /// on a surface grid of spacing <= r. Particle masses make the interior of the lattice exactly rest density.
+/// With several fluids, each particle carries the scalar attribute `fluid` (its fluid's index in the scene).
 Sample sampleScene(const Scene& scene);
 
 /// Mass that gives a particle of an infinite lattice of this spacing the density rho0 with kernel w.
 Real latticeMass(Real spacing, Real rho0, const CubicSpline& w);
 
-/// Boundary volumes V_k = 1 / sum_l W(x_k - x_l) over one body's particles (Akinci et al. 2012, Eq. 4).
+/// Boundary volumes V_k = gamma / sum_l W(x_k - x_l) over one body's particles (Akinci et al. 2012, Eq. 4),
+/// with gamma = flatWallCalibration(w).
 std::vector<Real> boundaryVolumes(const std::vector<Vec3>& x, const CubicSpline& w);
 
+/// The factor gamma that makes a flat wall (sampled with spacing r) one lattice spacing 2r from a resting fluid
+/// lattice give that fluid exactly its rest density; Akinci's 1/delta alone overshoots by about 6 %.
+Real flatWallCalibration(const CubicSpline& w);
 /// Densities of the fluid particles from the fluid and boundary neighbours, relative to rest: rho_i / rho0_i - 1.
 /// rho0_i of each particle comes from its mass and the lattice (all fluids share one lattice spacing).
 DensityCheck checkDensity(const ParticleSet& fluid, const std::vector<Real>& restDensity,

@@ -77,8 +77,9 @@ void writeParticleCache(const std::filesystem::path& path, const ParticleSet& fl
     std::vector<std::int64_t> ids(fluid.id().begin(), fluid.id().end());
     addAttribute(*grid, *index, "id", ids);
     for (const auto& [name, values] : fluid.scalars())
-        addAttribute(*grid, *index, name, std::vector<float>(values.begin(), values.end()));
-    for (const auto& [name, values] : fluid.vectors()) addAttribute(*grid, *index, name, toFloat3(values));
+        if (fluid.isCached(name)) addAttribute(*grid, *index, name, std::vector<float>(values.begin(), values.end()));
+    for (const auto& [name, values] : fluid.vectors())
+        if (fluid.isCached(name)) addAttribute(*grid, *index, name, toFloat3(values));
     grid->insertMeta("ganache_scene", openvdb::StringMetadata(info.scene));
     grid->insertMeta("ganache_frame", openvdb::Int64Metadata(info.frame));
     grid->insertMeta("ganache_time", openvdb::DoubleMetadata(info.time));

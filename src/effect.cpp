@@ -1,5 +1,8 @@
 #include "effect.h"
 
+#include "step.h"
+#include "viscosity_weiler2018.h"
+
 #include <fmt/format.h>
 
 namespace ganache {
@@ -9,6 +12,33 @@ namespace {
 std::shared_ptr<const EffectParams> readGravity(Section& s) {
     auto p = std::make_shared<GravityParams>();
     p->acceleration = s.vec3("acceleration", p->acceleration, "m/s^2");
+    return p;
+}
+
+/// v += dt g for every fluid particle.
+class Gravity final : public Effect {
+public:
+    explicit Gravity(const Vec3& g) : m_g(g) {}
+    void apply(StepContext& ctx, ParticleSet& particles) override {
+        for (Vec3& v : particles.v()) v += ctx.dt * m_g;
+    }
+
+private:
+    Vec3 m_g;
+};
+
+std::unique_ptr<Effect> makeGravity(const EffectParams& p, const Scene&, ParticleSet&) {
+    return std::make_unique<Gravity>(dynamic_cast<const GravityParams&>(p).acceleration);
+}
+
+std::shared_ptr<const EffectParams> readViscosity(Section& s) {
+    auto p = std::make_shared<ViscosityParams>();
+    if (s.has("mu")) p->mu = s.number("mu", std::nullopt, "Pa s", Bounds::nonNegative());
+    p->boundaryMu = s.number("boundary_mu", p->boundaryMu, "Pa s", Bounds::nonNegative());
+    p->tolerance = s.number("tolerance", p->tolerance, "relative residual", Bounds{0, 1, true, true});
+    p->maxIterations = s.integer("max_iterations", p->maxIterations, 1, 100000);
+    p->blockJacobi = s.choice("preconditioner", "block_jacobi", {"block_jacobi", "none"}) == "block_jacobi";
+    p->warmStart = s.boolean("warm_start", p->warmStart);
     return p;
 }
 
@@ -22,9 +52,19 @@ std::vector<std::string> effectNames() {
 
 const std::vector<EffectEntry>& effectTable() {
     static const std::vector<EffectEntry> table = {
-        {"gravity", Stage::Forces, "uniform acceleration of every fluid particle", &readGravity},
+        {"gravity", Stage::Forces, "uniform acceleration of every fluid particle", &readGravity, &makeGravity},
+        {"viscosity", Stage::Viscosity, "implicit viscosity of Weiler et al. 2018", &readViscosity,
+         &makeViscosityWeiler2018},
     };
     return table;
+}
+
+std::vector<std::vector<std::unique_ptr<Effect>>> makeEffects(const Scene& scene, ParticleSet& particles) {
+    std::vector<std::vector<std::unique_ptr<Effect>>> byStage(3);
+    for (const auto& spec : scene.effects)
+        for (const auto& e : effectTable())
+            if (e.name == spec.name) byStage[std::size_t(e.stage)].push_back(e.make(*spec.params, scene, particles));
+    return byStage;
 }
 
 std::vector<EffectSpec> readEffects(Section& effects) {

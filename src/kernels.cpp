@@ -12,4 +12,13 @@ CubicSpline::CubicSpline(Real supportRadius) : m_h(supportRadius) {
     m_l = Real(48) / (Real(M_PI) * h3);
 }
 
+Real latticeKernelSum(Real spacing, const CubicSpline& w) {
+    const int m = int(std::ceil(w.supportRadius() / spacing));
+    Real sum = 0;
+    for (int k = -m; k <= m; ++k)
+        for (int j = -m; j <= m; ++j)
+            for (int i = -m; i <= m; ++i) sum += w.W(spacing * Vec3(i, j, k));
+    return sum;
+}
+
 }  // namespace ganache

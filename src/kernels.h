@@ -47,4 +47,8 @@ private:
 /// about 30 neighbours per particle on a lattice of spacing 2 r, as in the paper and SPlisHSPlasH.
 inline Real supportRadiusFor(Real particleRadius) { return 4 * particleRadius; }
 
+/// Sum of W over an infinite cubic lattice of this spacing around one of its sites [1/m^3]: a particle of mass
+/// m on such a lattice has density m times this.
+Real latticeKernelSum(Real spacing, const CubicSpline& w);
+
 }  // namespace ganache

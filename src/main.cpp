@@ -37,7 +37,8 @@ int main(int argc, char** argv) {
         std::vector<StageId> stages;
     };
     const std::vector<Command> commands = {
-        {"run", "run every stage the scene asks for, in order", {StageId::Sample, StageId::Simulate}},
+        {"run", "run every stage the scene asks for, in order",
+         {StageId::Sample, StageId::Simulate, StageId::Surface, StageId::Render}},
         {"sample", "turn the scene's shapes into fluid and boundary particles (writes sample/<scene>.vdb)",
          {StageId::Sample}},
         {"simulate", "simulate from the sample, writing particles/<scene>.NNNN.vdb", {StageId::Simulate}},

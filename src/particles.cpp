@@ -24,15 +24,17 @@ void ParticleSet::reserve(std::size_t n) {
     for (auto& [name, a] : m_vectors) a.reserve(n);
 }
 
-std::vector<Real>& ParticleSet::addScalar(const std::string& name, Real value) {
+std::vector<Real>& ParticleSet::addScalar(const std::string& name, Real value, bool cached) {
     if (m_scalars.count(name) || m_vectors.count(name))
         throw std::logic_error("ParticleSet: attribute '" + name + "' exists already");
+    if (!cached) m_uncached.insert(name);
     return m_scalars.emplace(name, std::vector<Real>(size(), value)).first->second;
 }
 
-std::vector<Vec3>& ParticleSet::addVector(const std::string& name, const Vec3& value) {
+std::vector<Vec3>& ParticleSet::addVector(const std::string& name, const Vec3& value, bool cached) {
     if (m_scalars.count(name) || m_vectors.count(name))
         throw std::logic_error("ParticleSet: attribute '" + name + "' exists already");
+    if (!cached) m_uncached.insert(name);
     return m_vectors.emplace(name, std::vector<Vec3>(size(), value)).first->second;
 }
 

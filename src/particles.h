@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -32,8 +33,11 @@ public:
     const std::vector<std::uint64_t>& id() const { return m_id; }  ///< stable identities, unique in a run
 
     /// Adds a named per-particle scalar (initialised to `value`) and returns it; throws if it exists.
-    std::vector<Real>& addScalar(const std::string& name, Real value = 0);
-    std::vector<Vec3>& addVector(const std::string& name, const Vec3& value = Vec3::Zero());
+    /// Cached attributes are written to particle caches; uncached ones (solver warm starts) are state that
+    /// moves with the particles but is never written.
+    std::vector<Real>& addScalar(const std::string& name, Real value = 0, bool cached = true);
+    std::vector<Vec3>& addVector(const std::string& name, const Vec3& value = Vec3::Zero(), bool cached = true);
+    bool isCached(const std::string& name) const { return !m_uncached.count(name); }
     std::vector<Real>* findScalar(const std::string& name);
     const std::vector<Real>* findScalar(const std::string& name) const;
     std::vector<Vec3>* findVector(const std::string& name);
@@ -57,6 +61,7 @@ private:
     std::vector<std::uint64_t> m_id;
     std::map<std::string, std::vector<Real>> m_scalars;
     std::map<std::string, std::vector<Vec3>> m_vectors;
+    std::set<std::string> m_uncached;
 };
 
 /// Boundary particles of one body (Akinci et al. 2012): positions and volumes. The pseudo-mass a fluid

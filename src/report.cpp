@@ -2,6 +2,7 @@
 
 #include "atomic_file.h"
 #include "scene.h"
+#include "step.h"
 
 #include <fmt/format.h>
 
@@ -27,6 +28,38 @@ void RunReport::setCounts(std::size_t fluid, std::size_t boundary) {
     m_boundary = boundary;
 }
 
+void RunReport::setSimulation(const SolverStats& s, double simulatedTime, const std::vector<std::string>& effects,
+                              std::size_t finalFluid) {
+    using json = nlohmann::ordered_json;
+    const double steps = double(std::max<std::size_t>(s.steps, 1));
+    auto ms = [&](double seconds) { return 1000 * seconds / steps; };
+    m_simulation = json{
+        {"steps", s.steps},
+        {"simulated_time_s", simulatedTime},
+        {"effects_ran", effects},
+        {"dt_s", {{"min", s.steps ? s.dtMin : 0.0}, {"max", s.dtMax}}},
+        {"per_step_ms",
+         {{"forces", ms(s.time.forces)}, {"pressure", ms(s.time.pressure)}, {"advect", ms(s.time.advect)},
+          {"neighbours", ms(s.time.neighbours)}, {"divergence", ms(s.time.divergence)},
+          {"viscosity", ms(s.time.viscosity)}, {"end_of_step", ms(s.time.endOfStep)},
+          {"total", ms(s.time.forces + s.time.pressure + s.time.advect + s.time.neighbours + s.time.divergence +
+                       s.time.viscosity + s.time.endOfStep)}}},
+        {"solver",
+         {{"pressure_iterations_per_step", double(s.pressureIterations) / steps},
+          {"pressure_cap_hits", s.pressureCapHits},
+          {"divergence_iterations_per_step", double(s.divergenceIterations) / steps},
+          {"divergence_cap_hits", s.divergenceCapHits},
+          {"viscosity_solves", s.viscositySolves},
+          {"viscosity_iterations_per_solve",
+           s.viscositySolves ? double(s.viscosityIterations) / double(s.viscositySolves) : 0.0},
+          {"viscosity_cap_hits", s.viscosityCapHits},
+          {"viscosity_worst_residual", s.viscosityWorstResidual}}},
+        {"particles_removed", s.removedParticles},
+        {"fluid_particles_at_end", finalFluid},
+        {"warning_count", s.warningCount}};
+    m_warnings.insert(m_warnings.end(), s.warnings.begin(), s.warnings.end());
+}
+
 nlohmann::ordered_json RunReport::toJson() const {
     using json = nlohmann::ordered_json;
     json j;
@@ -38,20 +71,25 @@ nlohmann::ordered_json RunReport::toJson() const {
     j["settings"] = m_scene.effective->values;
     j["particles"] = {{"fluid", m_fluid}, {"boundary", m_boundary}};
     j["frames"] = m_lastFrame >= m_firstFrame ? json{{"first", m_firstFrame}, {"last", m_lastFrame}} : json(nullptr);
-    // Stepping arrives with the simulate stage; until then no step has run.
-    j["steps"] = 0;
-    j["simulated_time_s"] = 0.0;
+    const bool simulated = !m_simulation.is_null();
+    j["steps"] = simulated ? m_simulation["steps"] : json(0);
+    j["simulated_time_s"] = simulated ? m_simulation["simulated_time_s"] : json(0.0);
     json effects = json::array();
     for (const auto& e : m_scene.effects) effects.push_back(e.name);
     j["effects_requested"] = effects;
-    j["effects_ran"] = json::array();
+    j["effects_ran"] = simulated ? m_simulation["effects_ran"] : json::array();
     json stages = json::array();
     for (const auto& s : m_stages)
         stages.push_back({{"name", s.name}, {"status", s.status}, {"wall_s", s.seconds}, {"note", s.note},
                           {"outputs", s.outputs}});
     j["stages"] = stages;
-    j["per_step_ms"] = json::object();
-    j["solver"] = json::object();
+    j["per_step_ms"] = simulated ? m_simulation["per_step_ms"] : json::object();
+    j["solver"] = simulated ? m_simulation["solver"] : json::object();
+    if (simulated)
+        j["simulation"] = {{"dt_s", m_simulation["dt_s"]},
+                           {"particles_removed", m_simulation["particles_removed"]},
+                           {"fluid_particles_at_end", m_simulation["fluid_particles_at_end"]},
+                           {"warning_count", m_simulation["warning_count"]}};
     j["measurements"] = m_measurements;
     j["warnings"] = m_warnings;
     j["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - m_start).count();
@@ -67,7 +105,22 @@ std::string RunReport::table() const {
         t += fmt::format("  {:<10} {:<14} {:>9.3f}  {}\n", s.name, s.status, s.seconds, s.note);
     t += fmt::format("  particles: {} fluid, {} boundary; peak memory {:.1f} MiB\n", m_fluid, m_boundary,
                      double(peakMemoryBytes()) / (1024.0 * 1024.0));
-    for (const auto& w : m_warnings) t += "  warning: " + w + "\n";
+    if (!m_simulation.is_null()) {
+        const auto& ms = m_simulation["per_step_ms"];
+        const auto& sv = m_simulation["solver"];
+        t += fmt::format("  {} steps, per step: neighbours {:.2f} ms, pressure {:.2f} ms, divergence {:.2f} ms, "
+                         "viscosity {:.2f} ms, total {:.2f} ms\n",
+                         m_simulation["steps"].get<std::size_t>(), ms["neighbours"].get<double>(),
+                         ms["pressure"].get<double>(), ms["divergence"].get<double>(), ms["viscosity"].get<double>(),
+                         ms["total"].get<double>());
+        t += fmt::format("  iterations: pressure {:.1f}/step, divergence {:.1f}/step, viscosity CG {:.1f}/solve\n",
+                         sv["pressure_iterations_per_step"].get<double>(),
+                         sv["divergence_iterations_per_step"].get<double>(),
+                         sv["viscosity_iterations_per_solve"].get<double>());
+    }
+    const std::size_t shown = std::min<std::size_t>(m_warnings.size(), 5);
+    for (std::size_t w = 0; w < shown; ++w) t += "  warning: " + m_warnings[w] + "\n";
+    if (m_warnings.size() > shown) t += fmt::format("  ... {} more warnings in report.json\n", m_warnings.size() - shown);
     return t;
 }
 

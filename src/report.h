@@ -11,6 +11,7 @@
 namespace ganache {
 
 struct Scene;
+struct SolverStats;
 
 /// One pipeline stage as it ran (or did not).
 struct StageRecord {
@@ -29,6 +30,9 @@ public:
     void setCounts(std::size_t fluid, std::size_t boundary);
     void setFrames(std::int64_t first, std::int64_t last) { m_firstFrame = first, m_lastFrame = last; }
     void addWarning(const std::string& text) { m_warnings.push_back(text); }
+    /// What the simulate stage did: steps, time, the effects that ran, solver statistics and warnings.
+    void setSimulation(const SolverStats& stats, double simulatedTime, const std::vector<std::string>& effects,
+                       std::size_t finalFluid);
     /// Free-form facts a stage measured (e.g. the initial density error of the sample).
     nlohmann::ordered_json& measurements() { return m_measurements; }
 
@@ -45,6 +49,7 @@ private:
     std::size_t m_fluid = 0, m_boundary = 0;
     std::int64_t m_firstFrame = 0, m_lastFrame = -1;
     std::vector<std::string> m_warnings;
+    nlohmann::ordered_json m_simulation;  // empty until the simulate stage ran
     nlohmann::ordered_json m_measurements = nlohmann::ordered_json::object();
 };
 

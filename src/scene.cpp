@@ -241,6 +241,30 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     auto boundaries = root.list("boundaries");
     for (std::size_t i = 0; i < boundaries.size(); ++i) scene.boundaries.push_back(readBoundary(boundaries[i], i));
 
+    {
+        Section sim = root.section("simulation");
+        Section ts = sim.section("time_step");
+        TimeStepSettings& t = scene.timeStep;
+        t.cfl = ts.number("cfl", t.cfl, "", Bounds{0, 1, true, false});
+        t.dtMin = ts.positive("min", t.dtMin, "s");
+        t.dtMax = ts.positive("max", t.dtMax, "s");
+        if (t.dtMax < t.dtMin)
+            ts.fail("max", fmt::format("simulation.time_step.max ({} s) is below min ({} s)", formatNumber(t.dtMax),
+                                       formatNumber(t.dtMin)),
+                    "make max at least min");
+        t.fixedDt = ts.number("fixed", t.fixedDt, "s (0: adaptive CFL step)", Bounds::nonNegative());
+        ts.rejectUnused();
+        Section ps = sim.section("pressure");
+        PressureSettings& p = scene.pressure;
+        p.densityError = ps.number("density_error", 100 * p.densityError, "% of rest density",
+                                   Bounds{0, 10, true, false}) / 100;
+        p.divergenceError = ps.number("divergence_error", 100 * p.divergenceError, "% of rest density per step",
+                                      Bounds{0, 10, true, false}) / 100;
+        p.maxIterations = ps.integer("max_iterations", p.maxIterations, 1, 100000);
+        p.minIterations = ps.integer("min_iterations", p.minIterations, 0, p.maxIterations);
+        ps.rejectUnused();
+        sim.rejectUnused();
+    }
     if (auto eff = root.child("effects")) scene.effects = readEffects(*eff);
     root.rejectUnused();
 

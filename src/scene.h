@@ -74,6 +74,22 @@ struct BoundarySpec {
     Location at;
 };
 
+/// Time stepping: CFL-limited dt clamped to [dtMin, dtMax], or a fixed dt.
+struct TimeStepSettings {
+    Real cfl = 0.4;      ///< dt <= cfl * particle diameter / max speed
+    Real dtMin = 1e-5;   ///< [s]
+    Real dtMax = 5e-3;   ///< [s]
+    Real fixedDt = 0;    ///< [s]; > 0 replaces the CFL rule (refinement studies)
+};
+
+/// DFSPH tolerances (Bender & Koschier 2017).
+struct PressureSettings {
+    Real densityError = 1e-4;     ///< mean relative compression allowed after the constant-density solve
+    Real divergenceError = 1e-3;  ///< mean relative density rate dt Drho/Dt / rho_0 allowed after the divergence solve
+    std::int64_t maxIterations = 100;
+    std::int64_t minIterations = 2;
+};
+
 struct Scene {
     std::filesystem::path file;
     std::string name;  ///< output file prefix
@@ -93,6 +109,9 @@ struct Scene {
     std::vector<FluidSpec> fluids;
     std::vector<BoundarySpec> boundaries;
     std::vector<EffectSpec> effects;
+
+    TimeStepSettings timeStep;
+    PressureSettings pressure;
 
     std::shared_ptr<const EffectiveScene> effective;  ///< every value read, defaults included
 

@@ -5,6 +5,7 @@
 #include "progress.h"
 #include "report.h"
 #include "sampler.h"
+#include "step.h"
 
 #include <fmt/format.h>
 #include <tbb/global_control.h>
@@ -30,7 +31,6 @@ const char* stageName(StageId s) {
 // Stages this build does not have yet, and the issue that brings each.
 const char* missingStageNote(StageId s) {
     switch (s) {
-    case StageId::Simulate: return "the viscous solver is not part of this build yet (issue 3)";
     case StageId::Surface: return "the surfacer is not part of this build yet (issue 6)";
     case StageId::Render: return "the preview renderer is not part of this build yet (issue 7)";
     default: return nullptr;
@@ -48,7 +48,7 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
     auto& m = report.measurements()["sample"];
     for (std::size_t f = 0; f < scene.fluids.size(); ++f) m["fluid_particles"][scene.fluids[f].name] = sample.fluidCounts[f];
     for (const auto& b : sample.boundaries) m["boundary_particles"][b.name] = b.x.size();
-    m["lattice_sites_carved"] = sample.carved;
+    m["lattice_sites_carved"] = {{"by_earlier_fluids", sample.carved}, {"near_boundaries", sample.carvedByBoundaries}};
     m["initial_density_error"] = {{"max_compression", sample.density.maxCompression},
                                   {"mean_interior", sample.density.meanInterior},
                                   {"interior_particles", sample.density.interiorCount}};
@@ -63,6 +63,44 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
     stage.outputs.push_back(layout.sample().string());
     stage.note = fmt::format("{} fluid + {} boundary particles; initial max compression {:.2g} %",
                              sample.fluid.size(), boundaryCount, 100 * sample.density.maxCompression);
+}
+
+void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
+                 RunReport& report) {
+    StageRecord& stage = report.addStage("simulate");
+    Stopwatch clock;
+    CacheContents start = readParticleCache(layout.sample());
+    if (std::abs(start.info.particleRadius - scene.particleRadius) > 1e-9 * scene.particleRadius)
+        throw InputError(fmt::format("{}: sampled at particle radius {} m, but this run uses {} m ({} quality)\n  fix: "
+                                     "run `ganache sample` with the same --quality first",
+                                     layout.sample().string(), formatNumber(start.info.particleRadius),
+                                     formatNumber(scene.particleRadius), scene.quality.str()));
+    std::size_t boundaryCount = 0;
+    for (const auto& b : start.boundaries) boundaryCount += b.x.size();
+    report.setCounts(start.fluid.size(), boundaryCount);
+
+    Simulation sim(scene, std::move(start.fluid), start.boundaries);
+    const FrameRange& fr = scene.frames;
+    auto writeFrame = [&](std::int64_t f) {
+        if (f < frames.first || f > frames.second) return;
+        writeParticleCache(layout.particles(f), sim.particles(), {}, {scene.name, f, sim.time(), fr.fps,
+                                                                      scene.particleRadius});
+        stage.outputs.push_back(layout.particles(f).string());
+    };
+    Progress progress("simulate", std::size_t(frames.second - fr.start));
+    writeFrame(fr.start);
+    for (std::int64_t f = fr.start + 1; f <= frames.second; ++f) {
+        sim.advanceTo(fr.timeOf(f));
+        writeFrame(f);
+        progress.update(std::size_t(f - fr.start));
+    }
+    progress.finish();
+    report.setSimulation(sim.stats(), sim.time(), sim.effectNames(), sim.particles().size());
+    stage.seconds = clock.seconds();
+    const SolverStats& s = sim.stats();
+    stage.note = fmt::format("{} steps to t = {:.3f} s, {} frames written{}", s.steps, sim.time(),
+                             stage.outputs.size(),
+                             s.warningCount ? fmt::format(", {} warnings", s.warningCount) : std::string());
 }
 
 }  // namespace
@@ -90,7 +128,8 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
     const Quality quality = Quality::parse(options.quality);
     if (options.threads < 0) throw InputError("--threads must be 0 (every core) or a positive number");
     const Scene scene = loadScene(options.scene, quality);
-    if (!options.frames.empty()) parseFrameRange(options.frames, scene.frames);
+    const auto frames = options.frames.empty() ? std::make_pair(scene.frames.start, scene.frames.end)
+                                               : parseFrameRange(options.frames, scene.frames);
     if (options.resume)
         throw InputError("--resume: this build writes no checkpoints yet (issue 9), so there is nothing to resume\n"
                          "  fix: run without --resume");
@@ -116,7 +155,8 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
             stopped = true;
             continue;
         }
-        runSample(scene, layout, report);
+        if (id == StageId::Sample) runSample(scene, layout, report);
+        else runSimulate(scene, layout, frames, report);
     }
     report.write(layout.report());
     fmt::print(stderr, "{}", report.table());

@@ -58,7 +58,8 @@ TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
     const Result r = ganache("run " + kTiny + " --out " + out.string() + " --threads 2");
     ASSERT_EQ(r.code, 0) << r.output;
     EXPECT_TRUE(fs::exists(out / "sample/tiny.vdb"));
-    EXPECT_NE(r.output.find("not available"), std::string::npos) << "the missing solver is said, not faked";
+    for (int f = 1; f <= 5; ++f) EXPECT_TRUE(fs::exists(out / ("particles/tiny.000" + std::to_string(f) + ".vdb"))) << f;
+    EXPECT_NE(r.output.find("not available"), std::string::npos) << "the missing surfacer is said, not faked";
 
     std::ifstream in(out / "report.json");
     const auto report = nlohmann::json::parse(in);
@@ -69,8 +70,15 @@ TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
     EXPECT_EQ(report["stages"][0]["name"], "sample");
     EXPECT_EQ(report["stages"][0]["status"], "done");
     EXPECT_EQ(report["stages"][1]["name"], "simulate");
-    EXPECT_EQ(report["stages"][1]["status"], "not available");
+    EXPECT_EQ(report["stages"][1]["status"], "done");
+    EXPECT_EQ(report["stages"][2]["name"], "surface");
+    EXPECT_EQ(report["stages"][2]["status"], "not available");
     EXPECT_EQ(report["effects_requested"][0], "gravity");
+    EXPECT_EQ(report["effects_ran"], report["effects_requested"]);
+    EXPECT_GT(report["steps"].get<int>(), 0);
+    EXPECT_NEAR(report["simulated_time_s"].get<double>(), 0.4, 1e-9);  // frames 1-5 at 10 fps
+    EXPECT_GT(report["solver"]["viscosity_solves"].get<int>(), 0);
+    EXPECT_TRUE(report["per_step_ms"].contains("viscosity"));
     EXPECT_EQ(report["settings"]["particles"]["radius"], 0.01);
     EXPECT_GT(report["peak_memory_bytes"].get<double>(), 0);
     // Nothing half-written stays behind.
@@ -78,9 +86,26 @@ TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
         EXPECT_EQ(e.path().string().find(".tmp-"), std::string::npos) << e.path();
 }
 
-TEST(Cli, MissingStagesSaySoAndFail) {
-    const fs::path out = freshDir("simulate");
+TEST(Cli, SimulateNeedsTheSample) {
+    const fs::path out = freshDir("simulate_alone");
     const Result r = ganache("simulate " + kTiny + " --out " + out.string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find("ganache sample"), std::string::npos) << r.output;
+}
+
+TEST(Cli, FramesLimitWhatIsWritten) {
+    const fs::path out = freshDir("frames");
+    const Result r = ganache("run " + kTiny + " --frames 3-4 --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_FALSE(fs::exists(out / "particles/tiny.0002.vdb"));
+    EXPECT_TRUE(fs::exists(out / "particles/tiny.0003.vdb"));
+    EXPECT_TRUE(fs::exists(out / "particles/tiny.0004.vdb"));
+    EXPECT_FALSE(fs::exists(out / "particles/tiny.0005.vdb"));
+}
+
+TEST(Cli, MissingStagesSaySoAndFail) {
+    const fs::path out = freshDir("surface");
+    const Result r = ganache("surface " + kTiny + " --out " + out.string());
     EXPECT_EQ(r.code, 1);
     EXPECT_NE(r.output.find("not part of this build"), std::string::npos) << r.output;
 }

@@ -1,0 +1,209 @@
+#include "step.h"
+
+#include "pressure_dfsph.h"
+#include "scene.h"
+
+#include <fmt/format.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <chrono>
+
+namespace ganache {
+
+namespace {
+
+// Reorder the particles along the grid's Z curve this often, to keep neighbours close in memory.
+constexpr std::size_t kReorderInterval = 50;
+
+class ScopedTimer {
+public:
+    explicit ScopedTimer(double& total) : m_total(total), m_start(std::chrono::steady_clock::now()) {}
+    ~ScopedTimer() { m_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - m_start).count(); }
+
+private:
+    double& m_total;
+    std::chrono::steady_clock::time_point m_start;
+};
+
+}  // namespace
+
+void SolverStats::warn(std::string text) {
+    ++warningCount;
+    if (warnings.size() < kMaxWarnings) warnings.push_back(std::move(text));
+}
+
+Simulation::Simulation(const Scene& scene, ParticleSet fluid, const std::vector<BoundaryBody>& bodies)
+    : m_particleRadius(scene.particleRadius),
+      m_kernel(supportRadiusFor(scene.particleRadius)),
+      m_domainMin(scene.domainMin),
+      m_domainMax(scene.domainMax),
+      m_timeStep(scene.timeStep),
+      m_pressureSettings(scene.pressure),
+      m_fluid(std::move(fluid)),
+      m_fluidGrid(m_kernel.supportRadius()),
+      m_boundaryGrid(m_kernel.supportRadius()) {
+    // Every particle was sampled on the lattice of spacing 2r, so its mass says its rest density.
+    const Real latticeSum = latticeKernelSum(2 * m_particleRadius, m_kernel);
+    m_restDensity = &m_fluid.addScalar("_rest_density", 0, false);
+    for (std::size_t i = 0; i < m_fluid.size(); ++i) (*m_restDensity)[i] = m_fluid.mass()[i] * latticeSum;
+
+    for (std::size_t b = 0; b < bodies.size(); ++b) {
+        m_boundary.names.push_back(bodies[b].name);
+        m_boundary.x.insert(m_boundary.x.end(), bodies[b].x.begin(), bodies[b].x.end());
+        m_boundary.volume.insert(m_boundary.volume.end(), bodies[b].volume.begin(), bodies[b].volume.end());
+        m_boundary.body.insert(m_boundary.body.end(), bodies[b].x.size(), std::uint32_t(b));
+    }
+    m_boundary.v.assign(m_boundary.x.size(), Vec3::Zero());
+    m_boundaryGrid.build(m_boundary.x);
+
+    m_pressure = std::make_unique<PressureDFSPH>(m_pressureSettings, m_fluid);
+    m_effects = makeEffects(scene, m_fluid);
+    for (const auto& e : scene.effects) m_effectNames.push_back(e.name);
+
+    updateNeighbours();
+    computeDensities();
+    m_pressure->computeFactors(context(0), m_fluid);
+}
+
+Simulation::~Simulation() = default;
+
+StepContext Simulation::context(Real dt) {
+    return StepContext{dt, m_time, m_step, m_kernel, m_fluidNeighbours, m_boundaryNeighbours,
+                       m_density, *m_restDensity, m_boundary, m_stats};
+}
+
+void Simulation::updateNeighbours() {
+    const Real h = m_kernel.supportRadius();
+    m_fluidGrid.build(m_fluid.x());
+    if (m_step % kReorderInterval == 0) {
+        // The one place particles are reordered: every attribute moves together.
+        m_fluid.reorder(m_fluidGrid.sortedIndices());
+        m_fluidGrid.build(m_fluid.x());
+    }
+    findNeighbours(m_fluidGrid, m_fluid.x(), m_fluidGrid, m_fluid.x(), h, true, m_fluidNeighbours);
+    findNeighbours(m_fluidGrid, m_fluid.x(), m_boundaryGrid, m_boundary.x, h, false, m_boundaryNeighbours);
+}
+
+void Simulation::computeDensities() {
+    const std::size_t n = m_fluid.size();
+    m_density.resize(n);
+    const auto& x = m_fluid.x();
+    const auto& m = m_fluid.mass();
+    const auto& rho0 = *m_restDensity;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+            // rho_i = sum_j m_j W_ij + sum_k Psi_k W_ik, with Psi_k = rho_0 V_k [AIA+12]
+            Real rho = m[i] * m_kernel.W0();
+            for (std::uint32_t j : m_fluidNeighbours.of(i)) rho += m[j] * m_kernel.W(x[i] - x[j]);
+            for (std::uint32_t k : m_boundaryNeighbours.of(i))
+                rho += rho0[i] * m_boundary.volume[k] * m_kernel.W(x[i] - m_boundary.x[k]);
+            m_density[i] = rho;
+        }
+    });
+}
+
+Real Simulation::chooseDt(Real maxDt) const {
+    Real dt = m_timeStep.fixedDt;
+    if (dt <= 0) {
+        const auto& v = m_fluid.v();
+        const Real maxSpeed = std::sqrt(tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, v.size(), 4096), Real(0),
+            [&](const auto& r, Real s) {
+                for (std::size_t i = r.begin(); i != r.end(); ++i) s = std::max(s, v[i].squaredNorm());
+                return s;
+            },
+            [](Real a, Real b) { return std::max(a, b); }));
+        // [WKBB18 Alg. 1] dt <= 0.4 d / max|v|, d the particle diameter
+        dt = maxSpeed > 0 ? m_timeStep.cfl * 2 * m_particleRadius / maxSpeed : m_timeStep.dtMax;
+        dt = std::clamp(dt, m_timeStep.dtMin, m_timeStep.dtMax);
+    }
+    return std::min(dt, maxDt);
+}
+
+void Simulation::removeEscaped() {
+    const auto& x = m_fluid.x();
+    std::vector<std::uint8_t> out(x.size());
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < x.size(); ++i) {
+        out[i] = (x[i].array() < m_domainMin.array()).any() || (x[i].array() > m_domainMax.array()).any();
+        count += out[i];
+    }
+    if (count == 0) return;
+    m_fluid.removeIf(out);
+    m_stats.removedParticles += count;
+    m_stats.warn(fmt::format("step {} (t = {:.4f} s): {} particle(s) left the domain and were removed", m_step, m_time,
+                             count));
+}
+
+void Simulation::checkFinite(const char* stage) {
+    const auto& x = m_fluid.x();
+    const auto& v = m_fluid.v();
+    const std::size_t bad = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, x.size(), 4096), x.size(),
+        [&](const auto& r, std::size_t first) {
+            for (std::size_t i = r.begin(); i != r.end() && i < first; ++i)
+                if (!x[i].allFinite() || !v[i].allFinite()) return i;
+            return first;
+        },
+        [](std::size_t a, std::size_t b) { return std::min(a, b); });
+    if (bad == x.size()) return;
+    throw std::runtime_error(fmt::format(
+        "step {} (t = {:.6f} s): particle id {} has a non-finite {} after the {} stage\n  fix: lower "
+        "simulation.time_step.max, or check the scene for extreme values",
+        m_step, m_time, m_fluid.id()[bad], x[bad].allFinite() ? "velocity" : "position", stage));
+}
+
+void Simulation::step(Real maxDt) {
+    const Real dt = chooseDt(maxDt);
+    StepContext ctx = context(dt);
+    {
+        ScopedTimer t(m_stats.time.forces);
+        for (auto& e : m_effects[std::size_t(Stage::Forces)]) e->apply(ctx, m_fluid);
+        checkFinite("forces");
+    }
+    {
+        ScopedTimer t(m_stats.time.pressure);
+        m_pressure->solveDensity(ctx, m_fluid);
+        checkFinite("constant-density");
+    }
+    {
+        ScopedTimer t(m_stats.time.advect);
+        auto& x = m_fluid.x();
+        const auto& v = m_fluid.v();
+        for (std::size_t i = 0; i < x.size(); ++i) x[i] += dt * v[i];
+        removeEscaped();
+    }
+    {
+        ScopedTimer t(m_stats.time.neighbours);
+        updateNeighbours();
+        computeDensities();
+        m_pressure->computeFactors(ctx, m_fluid);
+    }
+    {
+        ScopedTimer t(m_stats.time.divergence);
+        m_pressure->solveDivergence(ctx, m_fluid);
+        checkFinite("divergence-free");
+    }
+    {
+        ScopedTimer t(m_stats.time.viscosity);
+        for (auto& e : m_effects[std::size_t(Stage::Viscosity)]) e->apply(ctx, m_fluid);
+        checkFinite("viscosity");
+    }
+    {
+        ScopedTimer t(m_stats.time.endOfStep);
+        for (auto& e : m_effects[std::size_t(Stage::EndOfStep)]) e->apply(ctx, m_fluid);
+        checkFinite("end-of-step");
+    }
+    m_time += dt;
+    ++m_step;
+    ++m_stats.steps;
+    m_stats.dtMin = std::min(m_stats.dtMin, dt);
+    m_stats.dtMax = std::max(m_stats.dtMax, dt);
+}
+
+void Simulation::advanceTo(Real t) {
+    while (t - m_time > 1e-12 * std::max<Real>(1, std::abs(t))) step(t - m_time);
+}
+
+}  // namespace ganache

@@ -1,0 +1,119 @@
+#pragma once
+// One simulation step in the fixed order of Algorithm 1 of Weiler et al. 2018, filled with the effects a
+// scene asks for:
+//   forces (gravity, ...) -> CFL time step -> constant-density solve [BK17] -> advection -> neighbour search,
+//   densities, DFSPH factors -> divergence-free solve [BK17] -> viscosity [WKBB18] -> end of step
+
+#include "effect.h"
+#include "kernels.h"
+#include "neighbour_search.h"
+#include "particles.h"
+#include "scene.h"
+
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace ganache {
+
+class PressureDFSPH;
+
+/// Every boundary particle of the scene in one set (Akinci et al. 2012).
+struct BoundaryParticles {
+    std::vector<Vec3> x;
+    std::vector<Vec3> v;           ///< velocities of the bodies' particles (zero for static bodies) [m/s]
+    std::vector<Real> volume;      ///< V_k; pseudo-mass Psi_k = rho_0 V_k [m^3]
+    std::vector<std::uint32_t> body;
+    std::vector<std::string> names;
+};
+
+/// Wall time [s] spent in each part of the step, summed over the steps.
+struct StageTimes {
+    double forces = 0, pressure = 0, advect = 0, neighbours = 0, divergence = 0, viscosity = 0, endOfStep = 0;
+};
+
+/// What the solvers did, summed over the steps, and what went wrong.
+struct SolverStats {
+    std::size_t steps = 0;
+    std::size_t pressureIterations = 0, pressureCapHits = 0;
+    std::size_t divergenceIterations = 0, divergenceCapHits = 0;
+    std::size_t viscositySolves = 0, viscosityIterations = 0, viscosityCapHits = 0;
+    Real viscosityWorstResidual = 0;  ///< largest relative residual a viscosity solve ended with
+    std::size_t removedParticles = 0;  ///< left the domain
+    Real dtMin = std::numeric_limits<Real>::infinity(), dtMax = 0;
+    StageTimes time;
+    std::vector<std::string> warnings;  ///< the first kMaxWarnings, then only counted
+    std::size_t warningCount = 0;
+    static constexpr std::size_t kMaxWarnings = 50;
+    void warn(std::string text);
+};
+
+/// What an effect may read in one step; nothing is global.
+struct StepContext {
+    Real dt = 0;
+    Real time = 0;  ///< at the start of the step [s]
+    std::size_t step = 0;
+    const CubicSpline& kernel;
+    const NeighbourList& fluidNeighbours;     ///< fluid-fluid, at the current positions
+    const NeighbourList& boundaryNeighbours;  ///< fluid-boundary
+    const std::vector<Real>& density;         ///< [kg/m^3], at the current positions
+    const std::vector<Real>& restDensity;     ///< rho_0 of each particle [kg/m^3]
+    const BoundaryParticles& boundary;
+    SolverStats& stats;
+};
+
+/// A running simulation: fluid particles, boundaries and the effects of the scene.
+class Simulation {
+public:
+    Simulation(const Scene& scene, ParticleSet fluid, const std::vector<BoundaryBody>& bodies);
+    ~Simulation();
+
+    /// Advances one step, no longer than maxDt. Throws std::runtime_error naming the stage and the particle at
+    /// the first non-finite value.
+    void step(Real maxDt = std::numeric_limits<Real>::infinity());
+    /// Steps until the time reaches t exactly (the last step is shortened to land on it).
+    void advanceTo(Real t);
+
+    Real time() const { return m_time; }
+    const ParticleSet& particles() const { return m_fluid; }
+    const BoundaryParticles& boundary() const { return m_boundary; }
+    const std::vector<Real>& density() const { return m_density; }
+    const SolverStats& stats() const { return m_stats; }
+    const CubicSpline& kernel() const { return m_kernel; }
+    const NeighbourList& fluidNeighbours() const { return m_fluidNeighbours; }
+    const NeighbourList& boundaryNeighbours() const { return m_boundaryNeighbours; }
+    /// Names of the effects the scene asked for, in stage order.
+    const std::vector<std::string>& effectNames() const { return m_effectNames; }
+
+private:
+    StepContext context(Real dt);
+    void updateNeighbours();
+    void computeDensities();
+    Real chooseDt(Real maxDt) const;
+    void removeEscaped();
+    void checkFinite(const char* stage);
+
+    Real m_particleRadius;
+    CubicSpline m_kernel;
+    Vec3 m_domainMin, m_domainMax;
+    TimeStepSettings m_timeStep;
+    PressureSettings m_pressureSettings;
+
+    ParticleSet m_fluid;
+    BoundaryParticles m_boundary;
+    UniformGrid m_fluidGrid, m_boundaryGrid;
+    NeighbourList m_fluidNeighbours, m_boundaryNeighbours;
+    std::vector<Real> m_density;
+    std::vector<Real>* m_restDensity;  // a particle attribute, so it moves with reordering and removal
+
+    std::unique_ptr<PressureDFSPH> m_pressure;
+    std::vector<std::vector<std::unique_ptr<Effect>>> m_effects;  // by Stage
+    std::vector<std::string> m_effectNames;
+
+    Real m_time = 0;
+    std::size_t m_step = 0;
+    SolverStats m_stats;
+};
+
+}  // namespace ganache

@@ -1,0 +1,199 @@
+#include "viscosity_weiler2018.h"
+
+#include "scene.h"
+
+#include <fmt/format.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <functional>
+#include <set>
+
+namespace ganache {
+
+namespace {
+
+constexpr Real kTwoDPlus4 = 10;  // 2 (d + 2) with d = 3
+
+template <class F>
+void forEachParticle(std::size_t n, F&& f) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 512), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
+    });
+}
+
+// Dot product of two vector fields; deterministic, so every run takes the same CG iterations.
+Real dot(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
+    return tbb::parallel_deterministic_reduce(
+        tbb::blocked_range<std::size_t>(0, a.size(), 2048), Real(0),
+        [&](const auto& r, Real s) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) s += a[i].dot(b[i]);
+            return s;
+        },
+        std::plus<Real>());
+}
+
+}  // namespace
+
+std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vector<Real>& density,
+                                   const NeighbourList& neighbours, const CubicSpline& kernel) {
+    const auto& x = particles.x();
+    const auto& v = particles.v();
+    const auto& m = particles.mass();
+    const Real eps = 0.01 * kernel.supportRadius() * kernel.supportRadius();
+    std::vector<Vec3> lap(particles.size(), Vec3::Zero());
+    forEachParticle(particles.size(), [&](std::size_t i) {
+        for (std::uint32_t j : neighbours.of(i)) {
+            const Vec3 xij = x[i] - x[j];
+            lap[i] += (m[j] / density[j]) * (v[i] - v[j]).dot(xij) / (xij.squaredNorm() + eps) * kernel.gradW(xij);
+        }
+        lap[i] *= kTwoDPlus4;
+    });
+    return lap;
+}
+
+ViscosityWeiler2018::ViscosityWeiler2018(const ViscosityParams& params, const Scene& scene, ParticleSet& particles)
+    : m_params(params), m_dv(&particles.addVector("_viscosity_dv", Vec3::Zero(), false)) {
+    if (params.mu) {
+        m_mu = *params.mu;
+        return;
+    }
+    std::set<Real> distinct;
+    for (const auto& f : scene.fluids) distinct.insert(f.material.mu);
+    m_mu = scene.fluids.front().material.mu;
+    if (distinct.size() == 1) return;
+    // Fluids of different viscosity: each particle carries its own, from the fluid it was sampled from.
+    const std::vector<Real>* fluidIndex = particles.findScalar("fluid");
+    if (!fluidIndex)
+        throw std::runtime_error("viscosity: the particles do not say which fluid they belong to; sample the scene "
+                                 "again with this version of ganache");
+    m_muPerParticle = &particles.addScalar("viscosity");
+    for (std::size_t i = 0; i < particles.size(); ++i)
+        (*m_muPerParticle)[i] = scene.fluids.at(std::size_t((*fluidIndex)[i])).material.mu;
+}
+
+void ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
+                                   std::vector<Vec3>& out) const {
+    const auto& x = particles.x();
+    const auto& m = particles.mass();
+    const auto& rho = ctx.density;
+    const Real h = ctx.kernel.supportRadius();
+    const Real eps = 0.01 * h * h;
+    const Real dt = ctx.dt;
+    const bool sticky = m_params.boundaryMu > 0;
+    forEachParticle(particles.size(), [&](std::size_t i) {
+        // (A v)_i = sum_j c_ij (x_ij . (v_i - v_j)) grad W_ij + sum_k c_ik (x_ik . v_i) grad W_ik
+        Vec3 av = Vec3::Zero();
+        for (std::uint32_t j : ctx.fluidNeighbours.of(i)) {
+            const Vec3 xij = x[i] - x[j];
+            const Real c = kTwoDPlus4 * 0.5 * (mu(i) + mu(j)) * 0.5 * (m[i] + m[j]) / (rho[i] * rho[j]) /
+                           (xij.squaredNorm() + eps);
+            av += c * xij.dot(in[i] - in[j]) * ctx.kernel.gradW(xij);
+        }
+        if (sticky)
+            for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+                const Vec3 xik = x[i] - ctx.boundary.x[k];
+                const Real c = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
+                               (rho[i] * rho[i]) / (xik.squaredNorm() + eps);
+                av += c * xik.dot(in[i]) * ctx.kernel.gradW(xik);
+            }
+        out[i] = in[i] - dt * av;
+    });
+}
+
+void ViscosityWeiler2018::apply(StepContext& ctx, ParticleSet& particles) {
+    const std::size_t n = particles.size();
+    if (n == 0) return;
+    const auto& x = particles.x();
+    const auto& m = particles.mass();
+    const auto& rho = ctx.density;
+    auto& v = particles.v();
+    auto& dv = *m_dv;
+    const Real h = ctx.kernel.supportRadius();
+    const Real eps = 0.01 * h * h;
+    const Real dt = ctx.dt;
+    const bool sticky = m_params.boundaryMu > 0;
+    for (auto* a : {&m_b, &m_x, &m_r, &m_z, &m_p, &m_q}) a->resize(n);
+    m_inverseDiagonal.resize(n);
+
+    // Right-hand side [Eq. 12], block-diagonal preconditioner [Eq. 11] and initial guess v_df + dv.
+    forEachParticle(n, [&](std::size_t i) {
+        Mat3 aii = Mat3::Zero();
+        for (std::uint32_t j : ctx.fluidNeighbours.of(i)) {
+            const Vec3 xij = x[i] - x[j];
+            const Real c = kTwoDPlus4 * 0.5 * (mu(i) + mu(j)) * 0.5 * (m[i] + m[j]) / (rho[i] * rho[j]) /
+                           (xij.squaredNorm() + eps);
+            aii += c * ctx.kernel.gradW(xij) * xij.transpose();
+        }
+        Vec3 b = v[i];
+        if (sticky)
+            for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+                const Vec3 xik = x[i] - ctx.boundary.x[k];
+                const Real c = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
+                               (rho[i] * rho[i]) / (xik.squaredNorm() + eps);
+                const Vec3 g = ctx.kernel.gradW(xik);
+                aii += c * g * xik.transpose();
+                b -= dt * c * ctx.boundary.v[k].dot(xik) * g;
+            }
+        m_b[i] = b;
+        m_inverseDiagonal[i] = m_params.blockJacobi ? Mat3(Mat3(Mat3::Identity() - dt * aii).inverse()) : Mat3(Mat3::Identity());
+        m_x[i] = m_params.warmStart ? Vec3(v[i] + dv[i]) : v[i];
+    });
+
+    const Real bNorm = std::sqrt(dot(m_b, m_b));
+    std::size_t iteration = 0;
+    Real residual = 0;
+    if (bNorm > 0) {
+        multiply(ctx, particles, m_x, m_q);
+        forEachParticle(n, [&](std::size_t i) {
+            m_r[i] = m_b[i] - m_q[i];
+            m_z[i] = m_inverseDiagonal[i] * m_r[i];
+            m_p[i] = m_z[i];
+        });
+        Real rz = dot(m_r, m_z);
+        residual = std::sqrt(dot(m_r, m_r)) / bNorm;
+        while (residual > m_params.tolerance && iteration < std::size_t(m_params.maxIterations)) {
+            multiply(ctx, particles, m_p, m_q);
+            const Real alpha = rz / dot(m_p, m_q);
+            forEachParticle(n, [&](std::size_t i) {
+                m_x[i] += alpha * m_p[i];
+                m_r[i] -= alpha * m_q[i];
+                m_z[i] = m_inverseDiagonal[i] * m_r[i];
+            });
+            const Real rzNext = dot(m_r, m_z);
+            const Real beta = rzNext / rz;
+            rz = rzNext;
+            forEachParticle(n, [&](std::size_t i) { m_p[i] = m_z[i] + beta * m_p[i]; });
+            residual = std::sqrt(dot(m_r, m_r)) / bNorm;
+            ++iteration;
+        }
+    } else {
+        std::fill(m_x.begin(), m_x.end(), Vec3::Zero());
+    }
+    if (!std::isfinite(residual))
+        throw std::runtime_error(fmt::format("step {}: the viscosity solve produced a non-finite residual; lower "
+                                             "simulation.time_step.max",
+                                             ctx.step));
+
+    forEachParticle(n, [&](std::size_t i) {
+        dv[i] = m_x[i] - v[i];
+        v[i] = m_x[i];
+    });
+    m_lastIterations = iteration;
+    m_lastResidual = residual;
+    ctx.stats.viscositySolves += 1;
+    ctx.stats.viscosityIterations += iteration;
+    ctx.stats.viscosityWorstResidual = std::max(ctx.stats.viscosityWorstResidual, residual);
+    if (residual > m_params.tolerance) {
+        ++ctx.stats.viscosityCapHits;
+        ctx.stats.warn(fmt::format("step {}: viscosity CG stopped at {} iterations (residual {:.3g} > {:.3g}); lower "
+                                   "simulation.time_step.max or raise effects.viscosity.max_iterations",
+                                   ctx.step, iteration, residual, m_params.tolerance));
+    }
+}
+
+std::unique_ptr<Effect> makeViscosityWeiler2018(const EffectParams& params, const Scene& scene, ParticleSet& particles) {
+    return std::make_unique<ViscosityWeiler2018>(dynamic_cast<const ViscosityParams&>(params), scene, particles);
+}
+
+}  // namespace ganache

@@ -1,0 +1,43 @@
+#pragma once
+// Implicit viscosity of Weiler, Koschier, Brand, Bender 2018: "A Physically Consistent Implicit Viscosity
+// Solver for SPH Fluids", Computer Graphics Forum 37(2). [WKBB18]
+
+#include "step.h"
+
+namespace ganache {
+
+/// The viscous Laplacian of Eq. 7 for every fluid particle (fluid neighbours only) [1/s]:
+/// lap v_i = 2(d+2) sum_j (m_j / rho_j) (v_ij . x_ij) / (|x_ij|^2 + 0.01 h^2) grad W_ij.
+std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vector<Real>& density,
+                                   const NeighbourList& neighbours, const CubicSpline& kernel);
+
+/// Solves (I - dt A) v = b for the velocities after the divergence-free solve [WKBB18 Eq. 8-12] with
+/// matrix-free preconditioned conjugate gradients. Per pair, mass and viscosity are averaged, so the system is
+/// symmetric positive definite. Holds a per-particle viscosity only when the scene's fluids differ in it.
+class ViscosityWeiler2018 final : public Effect {
+public:
+    ViscosityWeiler2018(const ViscosityParams& params, const Scene& scene, ParticleSet& particles);
+    void apply(StepContext& ctx, ParticleSet& particles) override;
+
+    /// Iterations and relative residual of the last solve.
+    std::size_t lastIterations() const { return m_lastIterations; }
+    Real lastResidual() const { return m_lastResidual; }
+
+private:
+    Real mu(std::size_t i) const { return m_muPerParticle ? (*m_muPerParticle)[i] : m_mu; }
+    void multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
+                  std::vector<Vec3>& out) const;
+
+    ViscosityParams m_params;
+    Real m_mu = 0;
+    std::vector<Real>* m_muPerParticle = nullptr;  // attribute `viscosity`, only when viscosities differ
+    std::vector<Vec3>* m_dv;                       // attribute `_viscosity_dv`: the last solve's change
+    std::vector<Vec3> m_b, m_x, m_r, m_z, m_p, m_q;
+    std::vector<Mat3> m_inverseDiagonal;
+    std::size_t m_lastIterations = 0;
+    Real m_lastResidual = 0;
+};
+
+std::unique_ptr<Effect> makeViscosityWeiler2018(const EffectParams& params, const Scene& scene, ParticleSet& particles);
+
+}  // namespace ganache

@@ -1,0 +1,233 @@
+#include "viscosity_weiler2018.h"
+
+#include "solver_test_util.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <random>
+
+using namespace ganache;
+using namespace ganache::testing;
+
+namespace {
+
+// A free block of 12^3 particles (r = 1 cm) in zero gravity: every particle near a free surface or corner.
+const char* kFreeBlock = R"(particles: {radius: 0.01}
+domain: {min: [-1, -1, -1], max: [1, 1, 1]}
+fluids: [{material: honey, box: {min: [-0.12, -0.12, -0.12], max: [0.12, 0.12, 0.12]}}]
+)";
+
+// SPH strain rate D_i = sym(sum_j (m_j / rho_j) (v_j - v_i) grad W_ij^T), the quantity strain-rate based
+// viscosity solvers build on [WKBB18 Sec. 6]; it is not part of ganache's solver.
+std::vector<Real> strainRateNorms(const Simulation& sim) {
+    const auto& p = sim.particles();
+    std::vector<Real> out(p.size());
+    for (std::size_t i = 0; i < p.size(); ++i) {
+        Mat3 grad = Mat3::Zero();
+        for (std::uint32_t j : sim.fluidNeighbours().of(i))
+            grad += (p.mass()[j] / sim.density()[j]) * (p.v()[j] - p.v()[i]) *
+                    sim.kernel().gradW(p.x()[i] - p.x()[j]).transpose();
+        out[i] = (0.5 * (grad + grad.transpose())).norm();
+    }
+    return out;
+}
+
+Vec3 linearMomentum(const ParticleSet& p) {
+    Vec3 s = Vec3::Zero();
+    for (std::size_t i = 0; i < p.size(); ++i) s += p.mass()[i] * p.v()[i];
+    return s;
+}
+
+Vec3 angularMomentum(const ParticleSet& p) {
+    Vec3 s = Vec3::Zero();
+    for (std::size_t i = 0; i < p.size(); ++i) s += p.mass()[i] * p.x()[i].cross(p.v()[i]);
+    return s;
+}
+
+// Sets the particles' velocities of a sampled scene before the simulation starts.
+template <class F>
+Simulation simulationWithVelocity(const Scene& scene, F&& velocity) {
+    Sample s = sampleScene(scene);
+    for (std::size_t i = 0; i < s.fluid.size(); ++i) s.fluid.v()[i] = velocity(s.fluid.x()[i]);
+    return Simulation(scene, std::move(s.fluid), s.boundaries);
+}
+
+}  // namespace
+
+TEST(ViscousLaplacian, VanishesForRigidRotationWhileStrainRateDoesNot) {
+    // [WKBB18 Fig. 2-3]: on a rigidly rotating block, free surface included, Eq. 7 is zero up to round-off
+    // (the paper reports below 1e-12; 1e-10 leaves room for the larger velocities here), whereas the SPH
+    // strain rate is far from zero at the surface because of the missing neighbours.
+    const Scene scene = sceneFromText("rigid", kFreeBlock);
+    const Vec3 omega(0.3, 1.0, -0.5);
+    const Vec3 vel(0.2, -0.1, 0.4);
+    Simulation sim = simulationWithVelocity(scene, [&](const Vec3& x) { return Vec3(vel + omega.cross(x)); });
+    const auto lap = viscousLaplacian(sim.particles(), sim.density(), sim.fluidNeighbours(), sim.kernel());
+    Real maxLap = 0;
+    for (const Vec3& l : lap) maxLap = std::max(maxLap, l.norm());
+    EXPECT_LT(maxLap, 1e-10);
+
+    const auto strain = strainRateNorms(sim);
+    Real maxStrain = 0;
+    for (Real s : strain) maxStrain = std::max(maxStrain, s);
+    // |omega| is about 1.2 1/s; a strain rate error of a tenth of it at the surface is "clearly non-zero".
+    EXPECT_GT(maxStrain, 0.1 * omega.norm());
+    std::printf("max |lap v| = %.3g 1/(m s), max |D| = %.3g 1/s\n", maxLap, maxStrain);
+}
+
+TEST(ViscosityWeiler2018, SolveConservesLinearAndAngularMomentum) {
+    // R1: a random velocity field, one implicit solve at a large viscosity. Pair forces are equal, opposite
+    // and along x_ij, so both momenta are kept to the solver tolerance.
+    const Scene scene = sceneFromText("momentum", kFreeBlock);
+    std::mt19937_64 rng(3);
+    std::normal_distribution<Real> n(0, 1);
+    Simulation sim = simulationWithVelocity(scene, [&](const Vec3&) { return Vec3(n(rng), n(rng), n(rng)); });
+    const Vec3 p0 = linearMomentum(sim.particles());
+    const Vec3 l0 = angularMomentum(sim.particles());
+    Real kinetic0 = 0;
+    for (std::size_t i = 0; i < sim.particles().size(); ++i) kinetic0 += sim.particles().v()[i].squaredNorm();
+
+    // One solve on the simulation's own neighbourhoods and densities.
+    SolverStats stats;
+    StepContext ctx{0.01, 0, 0, sim.kernel(), sim.fluidNeighbours(), sim.boundaryNeighbours(), sim.density(),
+                    *sim.particles().findScalar("_rest_density"), sim.boundary(), stats};
+    ParticleSet particles = sim.particles();
+    ViscosityParams params;
+    params.mu = 1000;
+    params.tolerance = 1e-10;
+    params.maxIterations = 1000;
+    ViscosityWeiler2018 viscosity(params, scene, particles);
+    viscosity.apply(ctx, particles);
+
+    const Vec3 p1 = linearMomentum(particles);
+    const Vec3 l1 = angularMomentum(particles);
+    Real kinetic1 = 0;
+    for (std::size_t i = 0; i < particles.size(); ++i) kinetic1 += particles.v()[i].squaredNorm();
+    // The scale of the momenta: total mass times a unit speed (times the block size for angular momentum).
+    Real mass = 0;
+    for (Real m : particles.mass()) mass += m;
+    EXPECT_LT((p1 - p0).norm(), 1e-8 * mass);
+    EXPECT_LT((l1 - l0).norm(), 1e-8 * mass * 0.12);
+    EXPECT_LT(kinetic1, 0.5 * kinetic0) << "viscosity must dissipate a random field";
+    EXPECT_GT(stats.viscosityIterations, 0u);
+    EXPECT_EQ(stats.viscosityCapHits, 0u);
+}
+
+TEST(ViscosityWeiler2018, PreconditionerAndWarmStartCutIterations) {
+    // [WKBB18 Sec. 4]: block Jacobi about halves the CG iterations, the warm start v_df + dv cuts them about
+    // 8x. Measured on a viscous cube spinning in zero gravity (Fig. 5), where the solve works every step.
+    auto iterationsWith = [](const std::string& options) {
+        const Scene scene = sceneFromText("spinning", std::string(R"(particles: {radius: 0.01}
+domain: {min: [-1, -1, -1], max: [1, 1, 1]}
+simulation: {time_step: {fixed: 0.002}}
+fluids: [{box: {min: [-0.1, -0.1, -0.1], max: [0.1, 0.1, 0.1]}}]
+)") + "effects: {viscosity: {mu: 10000, tolerance: 1.0e-6, max_iterations: 2000, " + options + "}}\n");
+        Simulation sim = simulationWithVelocity(scene, [](const Vec3& x) { return Vec3(Vec3(0, 0, 2).cross(x)); });
+        sim.advanceTo(0.05);
+        EXPECT_EQ(sim.stats().viscosityCapHits, 0u);
+        return double(sim.stats().viscosityIterations) / double(sim.stats().viscositySolves);
+    };
+    const double plain = iterationsWith("preconditioner: none, warm_start: false");
+    const double jacobi = iterationsWith("preconditioner: block_jacobi, warm_start: false");
+    const double both = iterationsWith("preconditioner: block_jacobi, warm_start: true");
+    std::printf("CG iterations per solve: none %.1f, block Jacobi %.1f (%.2fx), + warm start %.1f (%.2fx)\n", plain,
+                jacobi, plain / jacobi, both, jacobi / both);
+    EXPECT_LT(jacobi, plain);
+    EXPECT_LT(both, jacobi);
+}
+
+TEST(ViscosityWeiler2018, SpinningCubeKeepsItsAngularMomentum) {
+    // R1, Fig. 5: a very viscous cube spinning in zero gravity turns as a rigid body; the Laplacian of Eq. 7
+    // is zero for rigid rotation, so viscosity takes nothing from it. The issue's bound: >= 99 % after 0.5 s;
+    // the upper bound catches a gain (the warm start at a loose CG tolerance once added 1.9 %).
+    const Scene scene = sceneFromText("spinning_cube", R"(particles: {radius: 0.01}
+domain: {min: [-1, -1, -1], max: [1, 1, 1]}
+fluids: [{box: {min: [-0.1, -0.1, -0.1], max: [0.1, 0.1, 0.1]}}]
+effects: {viscosity: {mu: 10000}}
+)");
+    Simulation sim = simulationWithVelocity(scene, [](const Vec3& x) { return Vec3(Vec3(0, 2, 0).cross(x)); });
+    const Vec3 l0 = angularMomentum(sim.particles());
+    sim.advanceTo(0.5);
+    const Vec3 l1 = angularMomentum(sim.particles());
+    std::printf("angular momentum kept after 0.5 s: %.4f (%zu steps)\n", l1.dot(l0) / l0.squaredNorm(), sim.stats().steps);
+    EXPECT_NEAR(l1.dot(l0) / l0.squaredNorm(), 1.0, 0.01);
+    EXPECT_EQ(sim.particles().size(), std::size_t(1000));
+}
+
+TEST(Effects, OnlyWhatTheSceneAsksForExists) {
+    // Inviscid: the viscosity stage is empty and no viscosity array exists.
+    const Scene inviscid = sceneFromText("inviscid", std::string(kFreeBlock) + "effects: {gravity: {}}\n");
+    Simulation a = simulationOf(inviscid);
+    a.step();
+    EXPECT_EQ(a.particles().findVector("_viscosity_dv"), nullptr);
+    EXPECT_EQ(a.particles().findScalar("viscosity"), nullptr);
+    EXPECT_EQ(a.stats().viscositySolves, 0u);
+
+    // One viscosity for every fluid: the warm-start array, but no per-particle viscosity.
+    const Scene viscous = sceneFromText("viscous", std::string(kFreeBlock) + "effects: {viscosity: {}}\n");
+    Simulation b = simulationOf(viscous);
+    b.step();
+    EXPECT_NE(b.particles().findVector("_viscosity_dv"), nullptr);
+    EXPECT_EQ(b.particles().findScalar("viscosity"), nullptr);
+    EXPECT_EQ(b.stats().viscositySolves, 1u);
+
+    // Two fluids of different viscosity: each particle carries its own.
+    const Scene mixed = sceneFromText("mixed", R"(particles: {radius: 0.01}
+domain: {min: [-1, -1, -1], max: [1, 1, 1]}
+fluids:
+  - {material: honey, box: {min: [0, 0, 0], max: [0.1, 0.1, 0.1]}}
+  - {material: molten_chocolate, box: {min: [0.2, 0, 0], max: [0.3, 0.1, 0.1]}}
+effects: {viscosity: {}}
+)");
+    Simulation c = simulationOf(mixed);
+    const std::vector<Real>* mu = c.particles().findScalar("viscosity");
+    ASSERT_NE(mu, nullptr);
+    const std::vector<Real>& fluid = *c.particles().findScalar("fluid");
+    for (std::size_t i = 0; i < mu->size(); ++i) EXPECT_EQ((*mu)[i], fluid[i] == 0 ? 10.0 : 100.0);
+}
+
+TEST(Simulation, SameIterationsAndResultsForAnyThreadCount) {
+    auto run = [](int threads) {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+        const Scene scene = sceneFromText("threads", std::string(R"(particles: {radius: 0.01}
+domain: {min: [-0.3, -0.1, -0.3], max: [0.3, 0.5, 0.3]}
+fluids: [{box: {min: [-0.06, 0.05, -0.06], max: [0.06, 0.17, 0.06]}}]
+boundaries: [{name: floor, plane: {point: [0, 0, 0], normal: [0, 1, 0]}}]
+effects: {gravity: {}, viscosity: {mu: 1000}}
+)"));
+        Simulation sim = simulationOf(scene);
+        sim.advanceTo(0.05);
+        return std::make_pair(sim.stats(), sim.particles().x());
+    };
+    const auto [s1, x1] = run(1);
+    const auto [s2, x2] = run(2);
+    EXPECT_EQ(s1.steps, s2.steps);
+    EXPECT_EQ(s1.pressureIterations, s2.pressureIterations);
+    EXPECT_EQ(s1.divergenceIterations, s2.divergenceIterations);
+    EXPECT_EQ(s1.viscosityIterations, s2.viscosityIterations);
+    ASSERT_EQ(x1.size(), x2.size());
+    for (std::size_t i = 0; i < x1.size(); ++i) EXPECT_EQ(x1[i], x2[i]) << "particle " << i;
+}
+
+TEST(Simulation, LoneParticleAndPairStayFinite) {
+    // A particle with no neighbours gets no pressure (its DFSPH factor is zero) and falls onto the floor,
+    // which stops it; a pair likewise. Every value stays finite and nothing goes through the floor.
+    const Scene scene = sceneFromText("lone", R"(particles: {radius: 0.01}
+frames: {fps: 10, end: 6}
+domain: {min: [-0.5, -0.1, -0.5], max: [0.5, 1, 0.5]}
+fluids:
+  - {box: {min: [0, 0.2, 0], max: [0.02, 0.22, 0.02]}}
+  - {box: {min: [0.3, 0.1, 0], max: [0.34, 0.12, 0.02]}}
+boundaries: [{name: floor, plane: {point: [0, 0, 0], normal: [0, 1, 0]}}]
+effects: {gravity: {}, viscosity: {mu: 100}}
+)");
+    Simulation sim = simulationOf(scene);
+    ASSERT_EQ(sim.particles().size(), 3u);
+    sim.advanceTo(0.5);
+    EXPECT_EQ(sim.particles().size(), 3u);
+    for (std::size_t i = 0; i < 3; ++i) {
+        EXPECT_TRUE(sim.particles().x()[i].allFinite());
+        EXPECT_GT(sim.particles().x()[i].y(), 0.0) << "particle " << i << " went through the floor";
+    }
+}
