@@ -13,7 +13,8 @@ class PressureDFSPH {
 public:
     PressureDFSPH(const PressureSettings& settings, ParticleSet& particles);
 
-    /// DFSPH factors 1 / (|sum m grad W|^2 + sum |m grad W|^2) at the current positions [BK17 Eq. 11].
+    /// DFSPH factors 1 / (|sum m grad W|^2 + sum |m grad W|^2) at the current positions [BK17 Eq. 11], with the
+    /// boundary's mirrored pressure counted twice in the push.
     void computeFactors(const StepContext& ctx, const ParticleSet& particles);
     /// Constant-density solve on the predicted velocities, before advection.
     void solveDensity(StepContext& ctx, ParticleSet& particles);

@@ -196,7 +196,11 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     const bool stemIsName = !stem.empty() && std::all_of(stem.begin(), stem.end(), [](unsigned char c) {
         return std::isalnum(c) || c == '_' || c == '-';
     });
-    scene.name = root.name("name", stemIsName ? std::optional<std::string>(stem) : std::nullopt);
+    if (!stemIsName && !root.has("name"))
+        root.failMissing("name", fmt::format("the scene has no `name` and its file name '{}' cannot serve as one "
+                                             "(letters, digits, '_' and '-' only)", stem),
+                         "add `name: my_scene` or rename the file");
+    scene.name = root.name("name", stem);
 
     {
         Section fr = root.section("frames");
