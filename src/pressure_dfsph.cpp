@@ -136,7 +136,29 @@ std::size_t PressureDFSPH::solve(StepContext& ctx, ParticleSet& particles, std::
         });
         applyPressure(m_step);
     }
+    addBoundaryLoads(ctx, particles, pressure);
     return iteration;
+}
+
+void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const {
+    // The solve is linear in the pressures and the positions do not move during it, so the impulse the
+    // boundaries gave the fluid follows from the final pressures. Sequential: a deterministic sum.
+    const auto& x = particles.x();
+    const auto& m = particles.mass();
+    const Real dt = ctx.dt;
+    for (std::size_t i = 0; i < particles.size(); ++i) {
+        if (s[i] == 0) continue;
+        for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+            // Impulse on the body: the opposite of what the body gave particle i.
+            const Vec3 j = dt * m[i] * kMirror * ctx.restDensity[i] * ctx.boundary.volume[k] * s[i] *
+                           ctx.kernel.gradW(x[i] - ctx.boundary.x[k]);
+            const std::uint32_t b = ctx.boundary.body[k];
+            const BodyMotion& motion = ctx.boundary.motion[b];
+            ctx.loads.impulse[b] += j;
+            ctx.loads.angularImpulse[b] +=
+                (ctx.boundary.x[k] - (motion.centre + motion.offset(ctx.time + dt))).cross(j);
+        }
+    }
 }
 
 void PressureDFSPH::solveDensity(StepContext& ctx, ParticleSet& particles) {

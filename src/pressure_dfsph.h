@@ -28,6 +28,9 @@ private:
     std::size_t solve(StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure, Real tolerance,
                       Target target);
 
+    // Adds the impulse the pressures `s` gave through the boundary to each body's load.
+    void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const;
+
     PressureSettings m_settings;
     std::vector<Real> m_factor;  // 1 / denominator, 0 where it vanishes (lone particles)
     std::vector<Real> m_rate;    // Drho/Dt of the current iteration

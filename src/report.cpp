@@ -60,6 +60,16 @@ void RunReport::setSimulation(const SolverStats& s, double simulatedTime, const 
     m_warnings.insert(m_warnings.end(), s.warnings.begin(), s.warnings.end());
 }
 
+void RunReport::setBodies(const std::vector<std::string>& names, const std::vector<BodyReport>& bodies) {
+    auto vec = [](const Vec3& v) { return nlohmann::ordered_json::array({v.x(), v.y(), v.z()}); };
+    m_bodies = nlohmann::ordered_json::array();
+    for (std::size_t b = 0; b < bodies.size(); ++b)
+        m_bodies.push_back({{"name", names[b]},
+                            {"mean_force_N", vec(bodies[b].meanForce)},
+                            {"mean_torque_Nm", vec(bodies[b].meanTorque)},
+                            {"peak_force_N", bodies[b].peakForce}});
+}
+
 nlohmann::ordered_json RunReport::toJson() const {
     using json = nlohmann::ordered_json;
     json j;
@@ -90,6 +100,7 @@ nlohmann::ordered_json RunReport::toJson() const {
                            {"particles_removed", m_simulation["particles_removed"]},
                            {"fluid_particles_at_end", m_simulation["fluid_particles_at_end"]},
                            {"warning_count", m_simulation["warning_count"]}};
+    j["bodies"] = m_bodies;
     j["measurements"] = m_measurements;
     j["warnings"] = m_warnings;
     j["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - m_start).count();
@@ -118,6 +129,10 @@ std::string RunReport::table() const {
                          sv["divergence_iterations_per_step"].get<double>(),
                          sv["viscosity_iterations_per_solve"].get<double>());
     }
+    for (const auto& b : m_bodies)
+        t += fmt::format("  body {}: mean force [{:.3g}, {:.3g}, {:.3g}] N, peak {:.3g} N\n", b["name"].get<std::string>(),
+                         b["mean_force_N"][0].get<double>(), b["mean_force_N"][1].get<double>(),
+                         b["mean_force_N"][2].get<double>(), b["peak_force_N"].get<double>());
     const std::size_t shown = std::min<std::size_t>(m_warnings.size(), 5);
     for (std::size_t w = 0; w < shown; ++w) t += "  warning: " + m_warnings[w] + "\n";
     if (m_warnings.size() > shown) t += fmt::format("  ... {} more warnings in report.json\n", m_warnings.size() - shown);

@@ -12,6 +12,7 @@ namespace ganache {
 
 struct Scene;
 struct SolverStats;
+struct BodyReport;
 
 /// One pipeline stage as it ran (or did not).
 struct StageRecord {
@@ -33,6 +34,8 @@ public:
     /// What the simulate stage did: steps, time, the effects that ran, solver statistics and warnings.
     void setSimulation(const SolverStats& stats, double simulatedTime, const std::vector<std::string>& effects,
                        std::size_t finalFluid);
+    /// The fluid's force and torque on each boundary body.
+    void setBodies(const std::vector<std::string>& names, const std::vector<BodyReport>& bodies);
     /// Free-form facts a stage measured (e.g. the initial density error of the sample).
     nlohmann::ordered_json& measurements() { return m_measurements; }
 
@@ -50,6 +53,7 @@ private:
     std::int64_t m_firstFrame = 0, m_lastFrame = -1;
     std::vector<std::string> m_warnings;
     nlohmann::ordered_json m_simulation;  // empty until the simulate stage ran
+    nlohmann::ordered_json m_bodies = nlohmann::ordered_json::array();
     nlohmann::ordered_json m_measurements = nlohmann::ordered_json::object();
 };
 

@@ -133,6 +133,28 @@ BoundarySpec readBoundary(Section s, std::size_t index) {
         ps.rejectUnused();
         b.shape = plane;
     }
+    if (auto m = s.child("motion")) {
+        BodyMotion& mo = b.motion;
+        if (auto rot = m->child("rotation")) {
+            const Vec3 axis = rot->vec3("axis", mo.axis, "unit vector");
+            if (axis.norm() < 1e-12)
+                rot->fail("axis", rot->path() + ".axis must not be the zero vector", "e.g. `axis: [0, 1, 0]`");
+            mo.axis = axis.normalized();
+            mo.centre = rot->vec3("centre", mo.centre, "m");
+            mo.angularVelocity = rot->number("angular_velocity", std::nullopt, "rad/s");
+            rot->rejectUnused();
+        }
+        for (Section& k : m->list("keyframes")) {
+            const Real t = k.number("time", std::nullopt, "s", Bounds::nonNegative());
+            if (!mo.keyframes.empty() && !(t > mo.keyframes.back().first))
+                k.fail("time", fmt::format("{}.time ({} s) must come after the previous keyframe ({} s)", k.path(),
+                                           formatNumber(t), formatNumber(mo.keyframes.back().first)),
+                       "list keyframes in increasing time");
+            mo.keyframes.emplace_back(t, k.vec3("offset", std::nullopt, "m"));
+            k.rejectUnused();
+        }
+        m->rejectUnused();
+    }
     s.rejectUnused();
     return b;
 }
@@ -144,6 +166,25 @@ std::pair<Vec3, Vec3> boundsOf(const FluidShape& shape) {
 }
 
 }  // namespace
+
+Vec3 BodyMotion::offset(Real t) const {
+    if (keyframes.empty()) return Vec3::Zero();
+    if (t <= keyframes.front().first) return keyframes.front().second;
+    for (std::size_t k = 1; k < keyframes.size(); ++k)
+        if (t < keyframes[k].first) {
+            const auto& [t0, a] = keyframes[k - 1];
+            const auto& [t1, b] = keyframes[k];
+            return a + (t - t0) / (t1 - t0) * (b - a);
+        }
+    return keyframes.back().second;
+}
+
+Vec3 BodyMotion::translationVelocity(Real t) const {
+    for (std::size_t k = 1; k < keyframes.size(); ++k)
+        if (t >= keyframes[k - 1].first && t < keyframes[k].first)
+            return (keyframes[k].second - keyframes[k - 1].second) / (keyframes[k].first - keyframes[k - 1].first);
+    return Vec3::Zero();
+}
 
 Quality Quality::parse(const std::string& text) {
     if (text == "preview" || text == "final") return {text, 0};

@@ -67,10 +67,26 @@ struct PlaneBoundary {
 };
 using BoundaryShape = std::variant<BoxBoundary, PlaneBoundary>;
 
-/// A static solid the fluid cannot pass, made of boundary particles (Akinci et al. 2012).
+/// Prescribed motion of a boundary body: rotation about an axis through `centre` (which moves with the
+/// translation) at a constant angular velocity, plus a translation interpolated linearly between keyframes.
+struct BodyMotion {
+    Vec3 axis = Vec3::UnitY();  ///< unit length
+    Vec3 centre = Vec3::Zero();       ///< [m], at t = 0
+    Real angularVelocity = 0;         ///< [rad/s], right-handed about axis
+    std::vector<std::pair<Real, Vec3>> keyframes;  ///< (time [s], offset [m]), times increasing; empty: none
+    bool isStatic() const { return angularVelocity == 0 && keyframes.empty(); }
+    /// Offset of the translation at time t (held constant before the first and after the last keyframe).
+    Vec3 offset(Real t) const;
+    /// Translation velocity at time t [m/s].
+    Vec3 translationVelocity(Real t) const;
+};
+
+/// A solid the fluid cannot pass, made of boundary particles (Akinci et al. 2012); static unless it has a
+/// motion.
 struct BoundarySpec {
     std::string name;
     BoundaryShape shape;
+    BodyMotion motion;
     Location at;
 };
 

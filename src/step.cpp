@@ -53,9 +53,20 @@ Simulation::Simulation(const Scene& scene, ParticleSet fluid, const std::vector<
         m_boundary.x.insert(m_boundary.x.end(), bodies[b].x.begin(), bodies[b].x.end());
         m_boundary.volume.insert(m_boundary.volume.end(), bodies[b].volume.begin(), bodies[b].volume.end());
         m_boundary.body.insert(m_boundary.body.end(), bodies[b].x.size(), std::uint32_t(b));
+        // Caches name their bodies; the scene's motion goes with the body of the same name.
+        BodyMotion motion;
+        for (const auto& spec : scene.boundaries)
+            if (spec.name == bodies[b].name) motion = spec.motion;
+        m_boundary.anyMoving |= !motion.isStatic();
+        m_boundary.motion.push_back(motion);
     }
+    m_boundary.x0 = m_boundary.x;
     m_boundary.v.assign(m_boundary.x.size(), Vec3::Zero());
-    m_boundaryGrid.build(m_boundary.x);
+    m_loads.clear(bodies.size());
+    m_totalImpulse.assign(bodies.size(), Vec3::Zero());
+    m_totalAngular.assign(bodies.size(), Vec3::Zero());
+    m_peakForce.assign(bodies.size(), 0);
+    moveBoundaries(0);
 
     m_pressure = std::make_unique<PressureDFSPH>(m_pressureSettings, m_fluid);
     m_effects = makeEffects(scene, m_fluid);
@@ -70,7 +81,36 @@ Simulation::~Simulation() = default;
 
 StepContext Simulation::context(Real dt) {
     return StepContext{dt, m_time, m_step, m_kernel, m_fluidNeighbours, m_boundaryNeighbours,
-                       m_density, *m_restDensity, m_boundary, m_stats};
+                       m_density, *m_restDensity, m_boundary, m_stats, m_loads};
+}
+
+void Simulation::moveBoundaries(Real t) {
+    if (!m_boundary.anyMoving) {
+        if (m_boundaryGrid.pointCount() != m_boundary.x.size()) m_boundaryGrid.build(m_boundary.x);
+        return;
+    }
+    auto& b = m_boundary;
+    for (std::size_t k = 0; k < b.x.size(); ++k) {
+        const BodyMotion& m = b.motion[b.body[k]];
+        if (m.isStatic()) continue;
+        const Vec3 centre = m.centre + m.offset(t);
+        const Mat3 rotation = Eigen::AngleAxis<Real>(m.angularVelocity * t, m.axis).toRotationMatrix();
+        b.x[k] = centre + rotation * (b.x0[k] - m.centre);
+        b.v[k] = m.angularVelocity * m.axis.cross(b.x[k] - centre) + m.translationVelocity(t);
+    }
+    m_boundaryGrid.build(b.x);
+}
+
+std::vector<BodyReport> Simulation::bodyReports() const {
+    std::vector<BodyReport> out(m_totalImpulse.size());
+    for (std::size_t b = 0; b < out.size(); ++b) {
+        if (m_time > 0) {
+            out[b].meanForce = m_totalImpulse[b] / m_time;
+            out[b].meanTorque = m_totalAngular[b] / m_time;
+        }
+        out[b].peakForce = m_peakForce[b];
+    }
+    return out;
 }
 
 void Simulation::updateNeighbours() {
@@ -157,6 +197,7 @@ void Simulation::checkFinite(const char* stage) {
 void Simulation::step(Real maxDt) {
     const Real dt = chooseDt(maxDt);
     StepContext ctx = context(dt);
+    m_loads.clear(m_boundary.names.size());
     {
         ScopedTimer t(m_stats.time.forces);
         for (auto& e : m_effects[std::size_t(Stage::Forces)]) e->apply(ctx, m_fluid);
@@ -176,6 +217,7 @@ void Simulation::step(Real maxDt) {
     }
     {
         ScopedTimer t(m_stats.time.neighbours);
+        moveBoundaries(m_time + dt);
         updateNeighbours();
         computeDensities();
         m_pressure->computeFactors(ctx, m_fluid);
@@ -194,6 +236,11 @@ void Simulation::step(Real maxDt) {
         ScopedTimer t(m_stats.time.endOfStep);
         for (auto& e : m_effects[std::size_t(Stage::EndOfStep)]) e->apply(ctx, m_fluid);
         checkFinite("end-of-step");
+    }
+    for (std::size_t b = 0; b < m_loads.impulse.size(); ++b) {
+        m_totalImpulse[b] += m_loads.impulse[b];
+        m_totalAngular[b] += m_loads.angularImpulse[b];
+        m_peakForce[b] = std::max(m_peakForce[b], m_loads.impulse[b].norm() / dt);
     }
     m_time += dt;
     ++m_step;

@@ -23,9 +23,29 @@ class PressureDFSPH;
 struct BoundaryParticles {
     std::vector<Vec3> x;
     std::vector<Vec3> v;           ///< velocities of the bodies' particles (zero for static bodies) [m/s]
+    std::vector<Vec3> x0;          ///< positions at t = 0 [m]
     std::vector<Real> volume;      ///< V_k; pseudo-mass Psi_k = rho_0 V_k [m^3]
     std::vector<std::uint32_t> body;
     std::vector<std::string> names;
+    std::vector<BodyMotion> motion;  ///< per body
+    bool anyMoving = false;
+};
+
+/// The fluid's push on each body during the current step, as impulses [N s] and angular impulses [N m s]
+/// about the body's rotation centre at the step's end.
+struct BodyLoads {
+    std::vector<Vec3> impulse, angularImpulse;
+    void clear(std::size_t bodies) {
+        impulse.assign(bodies, Vec3::Zero());
+        angularImpulse.assign(bodies, Vec3::Zero());
+    }
+};
+
+/// Force and torque of the fluid on one body over a run.
+struct BodyReport {
+    Vec3 meanForce = Vec3::Zero();   ///< total impulse / time [N]
+    Vec3 meanTorque = Vec3::Zero();  ///< [N m]
+    Real peakForce = 0;              ///< largest |force| averaged over one step [N]
 };
 
 /// Wall time [s] spent in each part of the step, summed over the steps.
@@ -61,6 +81,7 @@ struct StepContext {
     const std::vector<Real>& restDensity;     ///< rho_0 of each particle [kg/m^3]
     const BoundaryParticles& boundary;
     SolverStats& stats;
+    BodyLoads& loads;
 };
 
 /// A running simulation: fluid particles, boundaries and the effects of the scene.
@@ -85,6 +106,8 @@ public:
     const NeighbourList& boundaryNeighbours() const { return m_boundaryNeighbours; }
     /// Names of the effects the scene asked for, in stage order.
     const std::vector<std::string>& effectNames() const { return m_effectNames; }
+    /// The fluid's force and torque on each body so far.
+    std::vector<BodyReport> bodyReports() const;
 
 private:
     StepContext context(Real dt);
@@ -92,6 +115,7 @@ private:
     void computeDensities();
     Real chooseDt(Real maxDt) const;
     void removeEscaped();
+    void moveBoundaries(Real t);
     void checkFinite(const char* stage);
 
     Real m_particleRadius;
@@ -114,6 +138,9 @@ private:
     Real m_time = 0;
     std::size_t m_step = 0;
     SolverStats m_stats;
+    BodyLoads m_loads;                                 // this step's
+    std::vector<Vec3> m_totalImpulse, m_totalAngular;  // per body, over the run
+    std::vector<Real> m_peakForce;
 };
 
 }  // namespace ganache

@@ -179,6 +179,7 @@ void ViscosityWeiler2018::apply(StepContext& ctx, ParticleSet& particles) {
         dv[i] = m_x[i] - v[i];
         v[i] = m_x[i];
     });
+    if (sticky) addBoundaryLoads(ctx, particles);
     m_lastIterations = iteration;
     m_lastResidual = residual;
     ctx.stats.viscositySolves += 1;
@@ -190,6 +191,28 @@ void ViscosityWeiler2018::apply(StepContext& ctx, ParticleSet& particles) {
                                    "simulation.time_step.max or raise effects.viscosity.max_iterations",
                                    ctx.step, iteration, residual, m_params.tolerance));
     }
+}
+
+void ViscosityWeiler2018::addBoundaryLoads(StepContext& ctx, const ParticleSet& particles) const {
+    // The viscous push of the boundary on particle i over the step, dt c_ik (x_ik . (v_i - v_k)) grad W_ik per
+    // unit mass with the new velocities; the body receives the opposite. Sequential: a deterministic sum.
+    const auto& x = particles.x();
+    const auto& v = particles.v();
+    const auto& m = particles.mass();
+    const Real h = ctx.kernel.supportRadius();
+    const Real eps = 0.01 * h * h;
+    for (std::size_t i = 0; i < particles.size(); ++i)
+        for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+            const Vec3 xik = x[i] - ctx.boundary.x[k];
+            const Real c = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
+                           (ctx.density[i] * ctx.density[i]) / (xik.squaredNorm() + eps);
+            const Vec3 j = -ctx.dt * m[i] * c * xik.dot(v[i] - ctx.boundary.v[k]) * ctx.kernel.gradW(xik);
+            const std::uint32_t b = ctx.boundary.body[k];
+            const BodyMotion& motion = ctx.boundary.motion[b];
+            ctx.loads.impulse[b] += j;
+            ctx.loads.angularImpulse[b] +=
+                (ctx.boundary.x[k] - (motion.centre + motion.offset(ctx.time + ctx.dt))).cross(j);
+        }
 }
 
 std::unique_ptr<Effect> makeViscosityWeiler2018(const EffectParams& params, const Scene& scene, ParticleSet& particles) {

@@ -25,6 +25,7 @@ public:
 
 private:
     Real mu(std::size_t i) const { return m_muPerParticle ? (*m_muPerParticle)[i] : m_mu; }
+    void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles) const;
     void multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out) const;
 

@@ -65,6 +65,18 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
                              sample.fluid.size(), boundaryCount, 100 * sample.density.maxCompression);
 }
 
+// Frames carry the boundary particles of the bodies that move (static ones are in the sample).
+std::vector<BoundaryBody> movingBodies(const BoundaryParticles& b) {
+    std::vector<BoundaryBody> out;
+    if (!b.anyMoving) return out;
+    for (std::size_t body = 0; body < b.names.size(); ++body) out.push_back({b.names[body], {}, {}});
+    for (std::size_t k = 0; k < b.x.size(); ++k) {
+        out[b.body[k]].x.push_back(b.x[k]);
+        out[b.body[k]].volume.push_back(b.volume[k]);
+    }
+    return out;
+}
+
 void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
                  RunReport& report) {
     StageRecord& stage = report.addStage("simulate");
@@ -83,8 +95,8 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     const FrameRange& fr = scene.frames;
     auto writeFrame = [&](std::int64_t f) {
         if (f < frames.first || f > frames.second) return;
-        writeParticleCache(layout.particles(f), sim.particles(), {}, {scene.name, f, sim.time(), fr.fps,
-                                                                      scene.particleRadius});
+        writeParticleCache(layout.particles(f), sim.particles(), movingBodies(sim.boundary()),
+                           {scene.name, f, sim.time(), fr.fps, scene.particleRadius});
         stage.outputs.push_back(layout.particles(f).string());
     };
     Progress progress("simulate", std::size_t(frames.second - fr.start));
@@ -96,6 +108,7 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     }
     progress.finish();
     report.setSimulation(sim.stats(), sim.time(), sim.effectNames(), sim.particles().size());
+    report.setBodies(sim.boundary().names, sim.bodyReports());
     stage.seconds = clock.seconds();
     const SolverStats& s = sim.stats();
     stage.note = fmt::format("{} steps to t = {:.3f} s, {} frames written{}", s.steps, sim.time(),

@@ -123,3 +123,60 @@ effects: {gravity: {}}
     EXPECT_EQ(sim.stats().removedParticles, n);
     EXPECT_FALSE(sim.stats().warnings.empty());
 }
+
+TEST(Stability, PaddleSpinningAtTwentyRadiansPerSecond) {
+    // A thin box spinning about the vertical axis through viscous fluid in a tank (the dough hook's case).
+    const Scene scene = sceneFromText("paddle", R"(particles: {radius: 0.005}
+domain: {min: [-0.1, -0.1, -0.1], max: [0.3, 0.4, 0.3]}
+fluids: [{material: honey, box: {min: [0.01, 0.01, 0.01], max: [0.19, 0.09, 0.19]}}]
+boundaries:
+  - {name: tank, box: {min: [0, 0, 0], max: [0.2, 0.3, 0.2], open_top: true}}
+  - name: paddle
+    box: {min: [0.06, 0.03, 0.095], max: [0.14, 0.2, 0.105]}
+    motion: {rotation: {axis: [0, 1, 0], centre: [0.1, 0, 0.1], angular_velocity: 20}}
+effects: {gravity: {}, viscosity: {mu: 100, boundary_mu: 100}}
+)");
+    Sample s = sampleScene(scene);
+    Simulation sim(scene, std::move(s.fluid), s.boundaries);
+    const std::size_t n = sim.particles().size();
+    sim.advanceTo(0.3);
+    EXPECT_EQ(sim.particles().size(), n);
+    for (std::size_t i = 0; i < n; ++i) {
+        const Vec3& x = sim.particles().x()[i];
+        ASSERT_TRUE(x.allFinite() && sim.particles().v()[i].allFinite());
+        EXPECT_TRUE((x.array() > kTankLo.array()).all() && (x.array() < kTankHi.array()).all()) << x.transpose();
+        // Nothing inside the paddle: in the paddle's frame, no particle within its box shrunk by r.
+        const Real angle = 20 * sim.time();
+        const Vec3 d = x - Vec3(0.1, 0, 0.1);
+        const Vec3 local(std::cos(angle) * d.x() - std::sin(angle) * d.z(), d.y(),
+                         std::sin(angle) * d.x() + std::cos(angle) * d.z());
+        const bool inside = std::abs(local.x()) < 0.04 - 0.005 && local.y() > 0.03 + 0.005 &&
+                            local.y() < 0.2 - 0.005 && std::abs(local.z()) < 0.003;
+        EXPECT_FALSE(inside) << "particle inside the paddle at " << x.transpose();
+    }
+    // The fluid resists the paddle: a torque about the axis against the rotation (+y spin, -y torque).
+    const auto bodies = sim.bodyReports();
+    ASSERT_EQ(bodies.size(), 2u);
+    EXPECT_LT(bodies[1].meanTorque.y(), 0.0);
+    std::printf("paddle: mean torque %.3g N m about y\n", bodies[1].meanTorque.y());
+}
+
+TEST(Stability, FloorCarriesTheWeightOfARestingBlob) {
+    // Newton's third law through the boundary: averaged over the run, the fluid pushes the floor down with its
+    // weight. A stiff blob starting just above the floor settles quickly; the average over
+    // 0.5 s includes the landing, so 5 % is allowed.
+    const Scene scene = sceneFromText("weight", R"(particles: {radius: 0.005}
+domain: {min: [-0.2, -0.1, -0.2], max: [0.2, 0.3, 0.2]}
+fluids: [{material: honey, box: {min: [-0.04, 0.011, -0.04], max: [0.04, 0.091, 0.04]}}]
+boundaries: [{name: floor, plane: {point: [0, 0, 0], normal: [0, 1, 0]}}]
+effects: {gravity: {}, viscosity: {mu: 1000}}
+)");
+    Simulation sim = simulationOf(scene);
+    Real mass = 0;
+    for (Real m : sim.particles().mass()) mass += m;
+    sim.advanceTo(0.5);
+    const Vec3 force = sim.bodyReports().at(0).meanForce;
+    std::printf("floor force %.4f N, weight %.4f N\n", force.y(), mass * 9.81);
+    EXPECT_NEAR(force.y(), -mass * 9.81, 0.05 * mass * 9.81);
+    EXPECT_LT(std::abs(force.x()) + std::abs(force.z()), 0.01 * mass * 9.81);
+}

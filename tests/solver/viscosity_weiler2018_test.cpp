@@ -90,8 +90,9 @@ TEST(ViscosityWeiler2018, SolveConservesLinearAndAngularMomentum) {
 
     // One solve on the simulation's own neighbourhoods and densities.
     SolverStats stats;
+    BodyLoads loads;
     StepContext ctx{0.01, 0, 0, sim.kernel(), sim.fluidNeighbours(), sim.boundaryNeighbours(), sim.density(),
-                    *sim.particles().findScalar("_rest_density"), sim.boundary(), stats};
+                    *sim.particles().findScalar("_rest_density"), sim.boundary(), stats, loads};
     ParticleSet particles = sim.particles();
     ViscosityParams params;
     params.mu = 1000;
