@@ -76,7 +76,7 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
 
 template <class Target>
 std::size_t PressureDFSPH::solve(StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
-                                 Real tolerance, Target target) {
+                                 Real tolerance, bool warmStart, Target target) {
     const std::size_t n = particles.size();
     if (n == 0) return 0;
     const Real dt = ctx.dt;
@@ -100,7 +100,8 @@ std::size_t PressureDFSPH::solve(StepContext& ctx, ParticleSet& particles, std::
         });
     };
 
-    applyPressure(pressure);  // warm start with the previous step's pressure
+    if (warmStart) applyPressure(pressure);  // the previous step's pressure (later passes: already applied)
+    else m_start = pressure;
     std::size_t iteration = 0;
     for (;; ++iteration) {
         forEachParticle(n, [&](std::size_t i) {
@@ -136,7 +137,13 @@ std::size_t PressureDFSPH::solve(StepContext& ctx, ParticleSet& particles, std::
         });
         applyPressure(m_step);
     }
-    addBoundaryLoads(ctx, particles, pressure);
+    // What this solve applied: all of it after a warm start, else what it added.
+    if (warmStart) {
+        addBoundaryLoads(ctx, particles, pressure);
+    } else {
+        for (std::size_t i = 0; i < n; ++i) m_start[i] = pressure[i] - m_start[i];
+        addBoundaryLoads(ctx, particles, m_start);
+    }
     return iteration;
 }
 
@@ -161,10 +168,10 @@ void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& partic
     }
 }
 
-void PressureDFSPH::solveDensity(StepContext& ctx, ParticleSet& particles) {
+void PressureDFSPH::solveDensity(StepContext& ctx, ParticleSet& particles, bool firstPass) {
     const Real dt = ctx.dt;
     // rho* - rho_0 = rho + dt Drho/Dt - rho_0 [BK17 Eq. 8]
-    ctx.stats.pressureIterations += solve(ctx, particles, *m_pressure, m_settings.densityError,
+    ctx.stats.pressureIterations += solve(ctx, particles, *m_pressure, m_settings.densityError, firstPass,
                                           [&](std::size_t i, Real rate) {
                                               return ctx.density[i] + dt * rate - ctx.restDensity[i];
                                           });
@@ -177,7 +184,7 @@ void PressureDFSPH::solveDivergence(StepContext& ctx, ParticleSet& particles) {
     // and at 3.8 m/s with the complementarity residual; starting from zero it comes to rest.
     m_pressureV.assign(particles.size(), 0);
     // dt Drho/Dt: the density change the rate would cause over one step [BK17 Eq. 9]
-    ctx.stats.divergenceIterations += solve(ctx, particles, m_pressureV, m_settings.divergenceError,
+    ctx.stats.divergenceIterations += solve(ctx, particles, m_pressureV, m_settings.divergenceError, false,
                                             [&](std::size_t, Real rate) { return dt * rate; });
 }
 

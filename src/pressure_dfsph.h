@@ -16,8 +16,9 @@ public:
     /// DFSPH factors 1 / (|sum m grad W|^2 + sum |m grad W|^2) at the current positions [BK17 Eq. 11], with the
     /// boundary's mirrored pressure counted twice in the push.
     void computeFactors(const StepContext& ctx, const ParticleSet& particles);
-    /// Constant-density solve on the predicted velocities, before advection.
-    void solveDensity(StepContext& ctx, ParticleSet& particles);
+    /// Constant-density solve on the predicted velocities, before advection. The first pass of a step applies
+    /// the previous step's pressure as a warm start; later passes (coupled with viscosity) only add to it.
+    void solveDensity(StepContext& ctx, ParticleSet& particles, bool firstPass);
     /// Divergence-free solve on the velocities after advection.
     void solveDivergence(StepContext& ctx, ParticleSet& particles);
 
@@ -26,7 +27,7 @@ private:
     // stops when the mean complementarity residual relative to rho_0 is below `tolerance`. Returns the iterations.
     template <class Target>
     std::size_t solve(StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure, Real tolerance,
-                      Target target);
+                      bool warmStart, Target target);
 
     // Adds the impulse the pressures `s` gave through the boundary to each body's load.
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const;
@@ -37,6 +38,7 @@ private:
     std::vector<Real> m_step;    // this iteration's change of the pressure value
     std::vector<Real>* m_pressure;  // constant-density pressure, warm start of the next step
     std::vector<Real> m_pressureV;  // divergence-free pressure of this step
+    std::vector<Real> m_start;      // pressures at the start of a solve that does not warm-start
 };
 
 }  // namespace ganache

@@ -308,6 +308,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
         p.maxIterations = ps.integer("max_iterations", p.maxIterations, 1, 100000);
         p.minIterations = ps.integer("min_iterations", p.minIterations, 0, p.maxIterations);
         ps.rejectUnused();
+        scene.viscosityCoupling = sim.integer("viscosity_coupling", scene.viscosityCoupling, 0, 10);
         sim.rejectUnused();
     }
     if (auto eff = root.child("effects")) scene.effects = readEffects(*eff);

@@ -128,6 +128,9 @@ struct Scene {
 
     TimeStepSettings timeStep;
     PressureSettings pressure;
+    /// simulation.viscosity_coupling: 0 runs the viscosity solve after the divergence-free solve (the paper's
+    /// order); n >= 1 alternates it n times with the constant-density solve before advection.
+    std::int64_t viscosityCoupling = 3;
 
     std::shared_ptr<const EffectiveScene> effective;  ///< every value read, defaults included
 

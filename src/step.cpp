@@ -40,6 +40,7 @@ Simulation::Simulation(const Scene& scene, ParticleSet fluid, const std::vector<
       m_domainMax(scene.domainMax),
       m_timeStep(scene.timeStep),
       m_pressureSettings(scene.pressure),
+      m_coupling(scene.viscosityCoupling),
       m_fluid(std::move(fluid)),
       m_fluidGrid(m_kernel.supportRadius()),
       m_boundaryGrid(m_kernel.supportRadius()) {
@@ -203,10 +204,25 @@ void Simulation::step(Real maxDt) {
         for (auto& e : m_effects[std::size_t(Stage::Forces)]) e->apply(ctx, m_fluid);
         checkFinite("forces");
     }
-    {
-        ScopedTimer t(m_stats.time.pressure);
-        m_pressure->solveDensity(ctx, m_fluid);
-        checkFinite("constant-density");
+    auto applyViscosity = [&] {
+        ScopedTimer t(m_stats.time.viscosity);
+        for (auto& e : m_effects[std::size_t(Stage::Viscosity)]) e->apply(ctx, m_fluid);
+        checkFinite("viscosity");
+    };
+    const bool viscous = !m_effects[std::size_t(Stage::Viscosity)].empty();
+    // Coupled (n >= 1): viscosity alternates with the constant-density solve before advection, so the motion
+    // that moves the particles has seen both. Each lone pressure solve answers gravity with an inviscid flow;
+    // advected for a whole step before viscosity acts, that flow made a stiff blob (1e4 Pa s) slump to 60 % of
+    // its height in 0.3 s at dt = 5 ms where smaller steps kept 98 %. One pass leaves viscous velocities that
+    // compress walls by 13 %; two passes satisfy both to a few percent.
+    const std::int64_t passes = viscous ? std::max<std::int64_t>(m_coupling, 1) : 1;
+    for (std::int64_t pass = 0; pass < passes; ++pass) {
+        {
+            ScopedTimer t(m_stats.time.pressure);
+            m_pressure->solveDensity(ctx, m_fluid, pass == 0);
+            checkFinite("constant-density");
+        }
+        if (viscous && m_coupling > 0) applyViscosity();
     }
     {
         ScopedTimer t(m_stats.time.advect);
@@ -227,11 +243,7 @@ void Simulation::step(Real maxDt) {
         m_pressure->solveDivergence(ctx, m_fluid);
         checkFinite("divergence-free");
     }
-    {
-        ScopedTimer t(m_stats.time.viscosity);
-        for (auto& e : m_effects[std::size_t(Stage::Viscosity)]) e->apply(ctx, m_fluid);
-        checkFinite("viscosity");
-    }
+    if (viscous && m_coupling == 0) applyViscosity();  // Algorithm 1 of the paper
     {
         ScopedTimer t(m_stats.time.endOfStep);
         for (auto& e : m_effects[std::size_t(Stage::EndOfStep)]) e->apply(ctx, m_fluid);

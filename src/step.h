@@ -1,8 +1,10 @@
 #pragma once
-// One simulation step in the fixed order of Algorithm 1 of Weiler et al. 2018, filled with the effects a
-// scene asks for:
+// One simulation step, filled with the effects a scene asks for. With simulation.viscosity_coupling = 0 it is
+// Algorithm 1 of Weiler et al. 2018:
 //   forces (gravity, ...) -> CFL time step -> constant-density solve [BK17] -> advection -> neighbour search,
 //   densities, DFSPH factors -> divergence-free solve [BK17] -> viscosity [WKBB18] -> end of step
+// With n > 0 (default 2) the constant-density solve and the viscosity solve alternate n times before advection
+// and the divergence-free solve ends the step.
 
 #include "effect.h"
 #include "kernels.h"
@@ -123,6 +125,7 @@ private:
     Vec3 m_domainMin, m_domainMax;
     TimeStepSettings m_timeStep;
     PressureSettings m_pressureSettings;
+    std::int64_t m_coupling;  // 0: viscosity after the divergence-free solve; n: n passes before advection
 
     ParticleSet m_fluid;
     BoundaryParticles m_boundary;

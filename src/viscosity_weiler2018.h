@@ -32,9 +32,11 @@ private:
     ViscosityParams m_params;
     Real m_mu = 0;
     std::vector<Real>* m_muPerParticle = nullptr;  // attribute `viscosity`, only when viscosities differ
-    std::vector<Vec3>* m_dv;                       // attribute `_viscosity_dv`: the last solve's change
+    std::vector<Vec3>* m_dv;                       // attribute `_viscosity_dv`: the last pass's change
     std::vector<Vec3> m_b, m_x, m_r, m_z, m_p, m_q;
     std::vector<Mat3> m_inverseDiagonal;
+    std::size_t m_lastStep = 0;
+    bool m_hasSolved = false;
     std::size_t m_lastIterations = 0;
     Real m_lastResidual = 0;
 };
