@@ -13,8 +13,8 @@ class PressureDFSPH {
 public:
     PressureDFSPH(const PressureSettings& settings, ParticleSet& particles);
 
-    /// DFSPH factors 1 / (|sum m grad W|^2 + sum |m grad W|^2) at the current positions [BK17 Eq. 11], with the
-    /// boundary's mirrored pressure counted twice in the push.
+    /// DFSPH factors 1 / (|sum m grad W + kWall sum Psi grad W|^2 + sum |m grad W|^2) at the current
+    /// positions [BK17 Eq. 11].
     void computeFactors(const StepContext& ctx, const ParticleSet& particles);
     /// Constant-density solve on the predicted velocities, before advection. The first pass of a step applies
     /// the previous step's pressure as a warm start; later passes (coupled with viscosity) only add to it.
