@@ -1,12 +1,9 @@
 #include "pressure_dfsph.h"
 
+#include "parallel.h"
 #include "scene_section.h"
 
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
-
-#include <functional>
 
 namespace ganache {
 
@@ -25,24 +22,6 @@ constexpr Real kWall = 2;
 // steps, as in IISPH (Ihmsen et al. 2014), converge.
 constexpr Real kRelaxation = 0.5;
 
-
-template <class F>
-void forEachParticle(std::size_t n, F&& f) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
-    });
-}
-
-// A sum whose value does not depend on the thread count (fixed chunks, fixed combination order).
-Real deterministicSum(const std::vector<Real>& a) {
-    return tbb::parallel_deterministic_reduce(
-        tbb::blocked_range<std::size_t>(0, a.size(), 4096), Real(0),
-        [&](const auto& r, Real s) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) s += a[i];
-            return s;
-        },
-        std::plus<Real>());
-}
 
 }  // namespace
 
@@ -114,7 +93,7 @@ std::size_t PressureDFSPH::solve(StepContext& ctx, ParticleSet& particles, std::
             // only be too light.
             error[i] = (pressure[i] > 0 ? std::abs(m_rate[i]) : std::max<Real>(m_rate[i], 0)) / ctx.restDensity[i];
         });
-        const Real meanError = deterministicSum(error) / Real(n);
+        const Real meanError = deterministicSum(n, [&](std::size_t i) { return error[i]; }) / Real(n);
         const bool converged = meanError <= tolerance;
         if ((converged && iteration >= std::size_t(m_settings.minIterations)) ||
             iteration >= std::size_t(m_settings.maxIterations)) {

@@ -1,12 +1,9 @@
 #include "viscosity_weiler2018.h"
 
+#include "parallel.h"
 #include "scene.h"
 
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
-
-#include <functional>
 #include <set>
 
 namespace ganache {
@@ -15,22 +12,9 @@ namespace {
 
 constexpr Real kTwoDPlus4 = 10;  // 2 (d + 2) with d = 3
 
-template <class F>
-void forEachParticle(std::size_t n, F&& f) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 512), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
-    });
-}
-
 // Dot product of two vector fields; deterministic, so every run takes the same CG iterations.
 Real dot(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
-    return tbb::parallel_deterministic_reduce(
-        tbb::blocked_range<std::size_t>(0, a.size(), 2048), Real(0),
-        [&](const auto& r, Real s) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) s += a[i].dot(b[i]);
-            return s;
-        },
-        std::plus<Real>());
+    return deterministicSum(a.size(), [&](std::size_t i) { return a[i].dot(b[i]); });
 }
 
 }  // namespace
@@ -72,13 +56,25 @@ ViscosityWeiler2018::ViscosityWeiler2018(const ViscosityParams& params, const Sc
         (*m_muPerParticle)[i] = scene.fluids.at(std::size_t((*fluidIndex)[i])).material.mu;
 }
 
+Real ViscosityWeiler2018::pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
+                                          const Vec3& xij) const {
+    // 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)), averaged mu and m keep A symmetric [Eq. 9]
+    const Real h = ctx.kernel.supportRadius();
+    return kTwoDPlus4 * 0.5 * (mu(i) + mu(j)) * 0.5 * (p.mass()[i] + p.mass()[j]) /
+           (ctx.density[i] * ctx.density[j]) / (xij.squaredNorm() + 0.01 * h * h);
+}
+
+Real ViscosityWeiler2018::boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k,
+                                              const Vec3& xik) const {
+    // 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) [Eq. 11-12]
+    const Real h = ctx.kernel.supportRadius();
+    return kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
+           (ctx.density[i] * ctx.density[i]) / (xik.squaredNorm() + 0.01 * h * h);
+}
+
 void ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                                    std::vector<Vec3>& out) const {
     const auto& x = particles.x();
-    const auto& m = particles.mass();
-    const auto& rho = ctx.density;
-    const Real h = ctx.kernel.supportRadius();
-    const Real eps = 0.01 * h * h;
     const Real dt = ctx.dt;
     const bool sticky = m_params.boundaryMu > 0;
     forEachParticle(particles.size(), [&](std::size_t i) {
@@ -86,16 +82,12 @@ void ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& pa
         Vec3 av = Vec3::Zero();
         for (std::uint32_t j : ctx.fluidNeighbours.of(i)) {
             const Vec3 xij = x[i] - x[j];
-            const Real c = kTwoDPlus4 * 0.5 * (mu(i) + mu(j)) * 0.5 * (m[i] + m[j]) / (rho[i] * rho[j]) /
-                           (xij.squaredNorm() + eps);
-            av += c * xij.dot(in[i] - in[j]) * ctx.kernel.gradW(xij);
+            av += pairCoefficient(ctx, particles, i, j, xij) * xij.dot(in[i] - in[j]) * ctx.kernel.gradW(xij);
         }
         if (sticky)
             for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
                 const Vec3 xik = x[i] - ctx.boundary.x[k];
-                const Real c = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
-                               (rho[i] * rho[i]) / (xik.squaredNorm() + eps);
-                av += c * xik.dot(in[i]) * ctx.kernel.gradW(xik);
+                av += boundaryCoefficient(ctx, i, k, xik) * xik.dot(in[i]) * ctx.kernel.gradW(xik);
             }
         out[i] = in[i] - dt * av;
     });
@@ -105,12 +97,8 @@ void ViscosityWeiler2018::apply(StepContext& ctx, ParticleSet& particles) {
     const std::size_t n = particles.size();
     if (n == 0) return;
     const auto& x = particles.x();
-    const auto& m = particles.mass();
-    const auto& rho = ctx.density;
     auto& v = particles.v();
     auto& dv = *m_dv;
-    const Real h = ctx.kernel.supportRadius();
-    const Real eps = 0.01 * h * h;
     const Real dt = ctx.dt;
     const bool sticky = m_params.boundaryMu > 0;
     for (auto* a : {&m_b, &m_x, &m_r, &m_z, &m_p, &m_q}) a->resize(n);
@@ -130,16 +118,13 @@ void ViscosityWeiler2018::apply(StepContext& ctx, ParticleSet& particles) {
         Mat3 aii = Mat3::Zero();
         for (std::uint32_t j : ctx.fluidNeighbours.of(i)) {
             const Vec3 xij = x[i] - x[j];
-            const Real c = kTwoDPlus4 * 0.5 * (mu(i) + mu(j)) * 0.5 * (m[i] + m[j]) / (rho[i] * rho[j]) /
-                           (xij.squaredNorm() + eps);
-            aii += c * ctx.kernel.gradW(xij) * xij.transpose();
+            aii += pairCoefficient(ctx, particles, i, j, xij) * ctx.kernel.gradW(xij) * xij.transpose();
         }
         Vec3 b = v[i];
         if (sticky)
             for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
                 const Vec3 xik = x[i] - ctx.boundary.x[k];
-                const Real c = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
-                               (rho[i] * rho[i]) / (xik.squaredNorm() + eps);
+                const Real c = boundaryCoefficient(ctx, i, k, xik);
                 const Vec3 g = ctx.kernel.gradW(xik);
                 aii += c * g * xik.transpose();
                 b -= dt * c * ctx.boundary.v[k].dot(xik) * g;
@@ -213,14 +198,11 @@ void ViscosityWeiler2018::addBoundaryLoads(StepContext& ctx, const ParticleSet& 
     const auto& x = particles.x();
     const auto& v = particles.v();
     const auto& m = particles.mass();
-    const Real h = ctx.kernel.supportRadius();
-    const Real eps = 0.01 * h * h;
     for (std::size_t i = 0; i < particles.size(); ++i)
         for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
             const Vec3 xik = x[i] - ctx.boundary.x[k];
-            const Real c = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
-                           (ctx.density[i] * ctx.density[i]) / (xik.squaredNorm() + eps);
-            const Vec3 j = -ctx.dt * m[i] * c * xik.dot(v[i] - ctx.boundary.v[k]) * ctx.kernel.gradW(xik);
+            const Vec3 j = -ctx.dt * m[i] * boundaryCoefficient(ctx, i, k, xik) * xik.dot(v[i] - ctx.boundary.v[k]) *
+                           ctx.kernel.gradW(xik);
             const std::uint32_t b = ctx.boundary.body[k];
             const BodyMotion& motion = ctx.boundary.motion[b];
             ctx.loads.impulse[b] += j;

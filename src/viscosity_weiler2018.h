@@ -25,6 +25,9 @@ public:
 
 private:
     Real mu(std::size_t i) const { return m_muPerParticle ? (*m_muPerParticle)[i] : m_mu; }
+    Real pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
+                         const Vec3& xij) const;
+    Real boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k, const Vec3& xik) const;
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles) const;
     void multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out) const;
