@@ -262,7 +262,14 @@ void Simulation::step(Real maxDt) {
 }
 
 void Simulation::advanceTo(Real t) {
-    while (t - m_time > 1e-12 * std::max<Real>(1, std::abs(t))) step(t - m_time);
+    while (t - m_time > 1e-12 * std::max<Real>(1, std::abs(t))) {
+        const Real left = t - m_time;
+        const Real dt = chooseDt(left);
+        // Never end on a sliver: the constant-density solve removes the leftover compression within one step, so
+        // a step of a microsecond before a frame turned a normal residual into a 9 MN push on the tank (and the
+        // warm start carried that pressure on). Between one and two steps left, take two halves.
+        step(left > dt && left < 2 * dt ? left / 2 : left);
+    }
 }
 
 }  // namespace ganache

@@ -95,7 +95,7 @@ public:
     /// Advances one step, no longer than maxDt. Throws std::runtime_error naming the stage and the particle at
     /// the first non-finite value.
     void step(Real maxDt = std::numeric_limits<Real>::infinity());
-    /// Steps until the time reaches t exactly (the last step is shortened to land on it).
+    /// Steps until the time reaches t exactly; the last two steps share what is left, so none is a sliver.
     void advanceTo(Real t);
 
     Real time() const { return m_time; }
