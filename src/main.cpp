@@ -28,7 +28,6 @@ int main(int argc, char** argv) {
         c->add_option("--frames", opt.frames, "frame range A-B (or one frame A) within the scene's frames");
         c->add_option("--threads", opt.threads, "worker threads (default 0: every core)");
         c->add_flag("--resume", opt.resume, "continue from the newest checkpoint (checkpoints arrive with issue 9)");
-        c->add_flag("--force", opt.force, "redo outputs that are up to date");
     };
 
     struct Command {

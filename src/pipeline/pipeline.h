@@ -22,7 +22,6 @@ struct RunOptions {
     int threads = 0;                                 ///< 0: every core
     std::string quality = "preview";
     bool resume = false;
-    bool force = false;
 };
 
 /// The inclusive frame range "A-B" (or "A") within the scene's frames; InputError when malformed or outside.
