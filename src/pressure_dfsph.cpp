@@ -1,7 +1,6 @@
 #include "pressure_dfsph.h"
 
 #include "parallel.h"
-#include "scene_section.h"
 
 #include <fmt/format.h>
 
@@ -21,7 +20,6 @@ constexpr Real kWall = 2;
 // iteration can overshoot in an alternating pattern and diverge (seen on a column resting on a wall); half
 // steps, as in IISPH (Ihmsen et al. 2014), converge.
 constexpr Real kRelaxation = 0.5;
-
 
 }  // namespace
 

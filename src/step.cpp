@@ -214,7 +214,8 @@ void Simulation::step(Real maxDt) {
     // that moves the particles has seen both. A lone pressure solve answers gravity with an inviscid flow;
     // advected for a whole step before viscosity acts, that flow made a stiff blob (1e4 Pa s) slump to 60 % of
     // its height in 0.3 s at dt = 5 ms where smaller steps kept 98 %, and let a 1e6 Pa s block sink through a
-    // floor. One pass leaves viscous velocities that compress walls by 13 %; three keep it near 6 %.
+    // floor. A single pass ends on viscous velocities the pressure has not seen (they pressed walls by 13 % with
+    // the boundary weighting of that time); three passes keep the stability suite within its bounds.
     const std::int64_t passes = viscous ? std::max<std::int64_t>(m_coupling, 1) : 1;
     for (std::int64_t pass = 0; pass < passes; ++pass) {
         {
