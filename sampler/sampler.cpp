@@ -2,9 +2,8 @@
 
 #include "kernels.h"
 #include "neighbour_search.h"
+#include "parallel.h"
 #include "progress.h"
-
-#include <tbb/parallel_for.h>
 
 #include <cmath>
 #include <variant>
@@ -120,12 +119,10 @@ std::vector<Real> boundaryVolumes(const std::vector<Vec3>& x, const CubicSpline&
     NeighbourList nl;
     findFluidNeighbours(grid, x, w.supportRadius(), nl);
     std::vector<Real> volume(x.size());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, x.size()), [&](const auto& r) {
-        for (std::size_t k = r.begin(); k != r.end(); ++k) {
-            Real delta = w.W0();
-            for (std::uint32_t l : nl.of(k)) delta += w.W(x[k] - x[l]);
-            volume[k] = gamma / delta;
-        }
+    forEachParticle(x.size(), [&](std::size_t k) {
+        Real delta = w.W0();
+        for (std::uint32_t l : nl.of(k)) delta += w.W(x[k] - x[l]);
+        volume[k] = gamma / delta;
     });
     return volume;
 }

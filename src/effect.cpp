@@ -1,5 +1,6 @@
 #include "effect.h"
 
+#include "parallel.h"
 #include "step.h"
 #include "viscosity_weiler2018.h"
 
@@ -20,7 +21,8 @@ class Gravity final : public Effect {
 public:
     explicit Gravity(const Vec3& g) : m_g(g) {}
     void apply(StepContext& ctx, ParticleSet& particles) override {
-        for (Vec3& v : particles.v()) v += ctx.dt * m_g;
+        auto& v = particles.v();
+        forEachParticle(v.size(), [&](std::size_t i) { v[i] += ctx.dt * m_g; }, 4096);
     }
 
 private:

@@ -71,4 +71,15 @@ private:
     std::chrono::steady_clock::time_point m_start = std::chrono::steady_clock::now();
 };
 
+/// Adds the wall time of its scope to `total` [s].
+class ScopedTimer {
+public:
+    explicit ScopedTimer(double& total) : m_total(total) {}
+    ~ScopedTimer() { m_total += m_clock.seconds(); }
+
+private:
+    double& m_total;
+    Stopwatch m_clock;
+};
+
 }  // namespace ganache

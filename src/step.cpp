@@ -1,13 +1,12 @@
 #include "step.h"
 
+#include "parallel.h"
 #include "pressure_dfsph.h"
+#include "report.h"
 #include "scene.h"
 
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
-
-#include <chrono>
 
 namespace ganache {
 
@@ -15,16 +14,6 @@ namespace {
 
 // Reorder the particles along the grid's Z curve this often, to keep neighbours close in memory.
 constexpr std::size_t kReorderInterval = 50;
-
-class ScopedTimer {
-public:
-    explicit ScopedTimer(double& total) : m_total(total), m_start(std::chrono::steady_clock::now()) {}
-    ~ScopedTimer() { m_total += std::chrono::duration<double>(std::chrono::steady_clock::now() - m_start).count(); }
-
-private:
-    double& m_total;
-    std::chrono::steady_clock::time_point m_start;
-};
 
 }  // namespace
 
@@ -132,15 +121,13 @@ void Simulation::computeDensities() {
     const auto& x = m_fluid.x();
     const auto& m = m_fluid.mass();
     const auto& rho0 = *m_restDensity;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
-            // rho_i = sum_j m_j W_ij + sum_k Psi_k W_ik, with Psi_k = rho_0 V_k [AIA+12]
-            Real rho = m[i] * m_kernel.W0();
-            for (std::uint32_t j : m_fluidNeighbours.of(i)) rho += m[j] * m_kernel.W(x[i] - x[j]);
-            for (std::uint32_t k : m_boundaryNeighbours.of(i))
-                rho += rho0[i] * m_boundary.volume[k] * m_kernel.W(x[i] - m_boundary.x[k]);
-            m_density[i] = rho;
-        }
+    forEachParticle(n, [&](std::size_t i) {
+        // rho_i = sum_j m_j W_ij + sum_k Psi_k W_ik, with Psi_k = rho_0 V_k [AIA+12]
+        Real rho = m[i] * m_kernel.W0();
+        for (std::uint32_t j : m_fluidNeighbours.of(i)) rho += m[j] * m_kernel.W(x[i] - x[j]);
+        for (std::uint32_t k : m_boundaryNeighbours.of(i))
+            rho += rho0[i] * m_boundary.volume[k] * m_kernel.W(x[i] - m_boundary.x[k]);
+        m_density[i] = rho;
     });
 }
 
@@ -229,7 +216,7 @@ void Simulation::step(Real maxDt) {
         ScopedTimer t(m_stats.time.advect);
         auto& x = m_fluid.x();
         const auto& v = m_fluid.v();
-        for (std::size_t i = 0; i < x.size(); ++i) x[i] += dt * v[i];
+        forEachParticle(x.size(), [&](std::size_t i) { x[i] += dt * v[i]; }, 4096);
         removeEscaped();
     }
     {
