@@ -88,8 +88,6 @@ std::vector<Vec3> samplePlane(const PlaneBoundary& plane, const Vec3& lo, const 
 
 }  // namespace
 
-Real latticeMass(Real spacing, Real rho0, const CubicSpline& w) { return rho0 / latticeKernelSum(spacing, w); }
-
 Real flatWallCalibration(const CubicSpline& w) {
     // The fluid lattice (spacing d = 2r = h/2) on y >= 0 and a wall sheet (spacing r) at y = -d, where the
     // missing fluid layer would be. Akinci's 1/delta alone makes the sheet about 6 % heavier than that layer.
@@ -210,8 +208,9 @@ Sample sampleScene(const Scene& scene) {
         return false;
     };
 
-    // Which fluid a particle came from matters only when there are several (per-fluid viscosity, colours).
-    std::vector<Real>* fluidIndex = scene.fluids.size() > 1 ? &out.fluid.addScalar("fluid") : nullptr;
+    // Which fluid (or emitter) a particle came from matters only when there are several (per-fluid viscosity,
+    // colours); emitters give their particles the indices after the fluids'.
+    std::vector<Real>* fluidIndex = scene.sourceMaterials().size() > 1 ? &out.fluid.addScalar("fluid") : nullptr;
     for (std::size_t f = 0; f < scene.fluids.size(); ++f) {
         const FluidSpec& spec = scene.fluids[f];
         const Real mass = latticeMass(d, spec.material.density, w);

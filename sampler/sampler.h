@@ -28,11 +28,9 @@ struct Sample {
 
 /// Samples every fluid of the scene on a lattice of spacing 2r (r = scene.particleRadius) and every boundary
 /// on a surface grid of spacing <= r. Particle masses make the interior of the lattice exactly rest density.
-/// With several fluids, each particle carries the scalar attribute `fluid` (its fluid's index in the scene).
+/// With several sources of fluid (fluids and emitters), each particle carries the scalar attribute `fluid`: its
+/// index in Scene::sourceMaterials().
 Sample sampleScene(const Scene& scene);
-
-/// Mass that gives a particle of an infinite lattice of this spacing the density rho0 with kernel w.
-Real latticeMass(Real spacing, Real rho0, const CubicSpline& w);
 
 /// Boundary volumes V_k = gamma / sum_l W(x_k - x_l) over one body's particles (Akinci et al. 2012, Eq. 4),
 /// with gamma = flatWallCalibration(w).

@@ -51,4 +51,7 @@ inline Real supportRadiusFor(Real particleRadius) { return 4 * particleRadius; }
 /// m on such a lattice has density m times this.
 Real latticeKernelSum(Real spacing, const CubicSpline& w);
 
+/// Mass that gives a particle of an infinite lattice of this spacing the density rho0 with kernel w [kg].
+inline Real latticeMass(Real spacing, Real rho0, const CubicSpline& w) { return rho0 / latticeKernelSum(spacing, w); }
+
 }  // namespace ganache

@@ -40,10 +40,8 @@ void RunReport::setSimulation(const SolverStats& s, double simulatedTime, const 
         {"dt_s", {{"min", s.steps ? s.dtMin : 0.0}, {"max", s.dtMax}}},
         {"per_step_ms",
          {{"forces", ms(s.time.forces)}, {"pressure", ms(s.time.pressure)}, {"advect", ms(s.time.advect)},
-          {"neighbours", ms(s.time.neighbours)}, {"divergence", ms(s.time.divergence)},
-          {"viscosity", ms(s.time.viscosity)}, {"end_of_step", ms(s.time.endOfStep)},
-          {"total", ms(s.time.forces + s.time.pressure + s.time.advect + s.time.neighbours + s.time.divergence +
-                       s.time.viscosity + s.time.endOfStep)}}},
+          {"emit", ms(s.time.emit)}, {"neighbours", ms(s.time.neighbours)}, {"divergence", ms(s.time.divergence)},
+          {"viscosity", ms(s.time.viscosity)}, {"end_of_step", ms(s.time.endOfStep)}, {"total", ms(s.time.total())}}},
         {"solver",
          {{"pressure_iterations_per_step", double(s.pressureIterations) / steps},
           {"pressure_cap_hits", s.pressureCapHits},
@@ -55,6 +53,7 @@ void RunReport::setSimulation(const SolverStats& s, double simulatedTime, const 
           {"viscosity_cap_hits", s.viscosityCapHits},
           {"viscosity_worst_residual", s.viscosityWorstResidual}}},
         {"particles_removed", s.removedParticles},
+        {"particles_emitted", s.emittedParticles},
         {"fluid_particles_at_end", finalFluid},
         {"warning_count", s.warningCount}};
     m_warnings.insert(m_warnings.end(), s.warnings.begin(), s.warnings.end());
@@ -68,6 +67,12 @@ void RunReport::setBodies(const std::vector<std::string>& names, const std::vect
                             {"mean_force_N", vec(bodies[b].meanForce)},
                             {"mean_torque_Nm", vec(bodies[b].meanTorque)},
                             {"peak_force_N", bodies[b].peakForce}});
+}
+
+void RunReport::setEmitters(const std::vector<EmitterReport>& emitters) {
+    m_emitters = nlohmann::ordered_json::array();
+    for (const auto& e : emitters)
+        m_emitters.push_back({{"name", e.name}, {"particles_emitted", e.emitted}, {"sites_blocked", e.blocked}});
 }
 
 nlohmann::ordered_json RunReport::toJson() const {
@@ -98,9 +103,11 @@ nlohmann::ordered_json RunReport::toJson() const {
     if (simulated)
         j["simulation"] = {{"dt_s", m_simulation["dt_s"]},
                            {"particles_removed", m_simulation["particles_removed"]},
+                           {"particles_emitted", m_simulation["particles_emitted"]},
                            {"fluid_particles_at_end", m_simulation["fluid_particles_at_end"]},
                            {"warning_count", m_simulation["warning_count"]}};
     j["bodies"] = m_bodies;
+    j["emitters"] = m_emitters;
     j["measurements"] = m_measurements;
     j["warnings"] = m_warnings;
     j["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - m_start).count();
@@ -133,6 +140,9 @@ std::string RunReport::table() const {
         t += fmt::format("  body {}: mean force [{:.3g}, {:.3g}, {:.3g}] N, peak {:.3g} N\n", b["name"].get<std::string>(),
                          b["mean_force_N"][0].get<double>(), b["mean_force_N"][1].get<double>(),
                          b["mean_force_N"][2].get<double>(), b["peak_force_N"].get<double>());
+    for (const auto& e : m_emitters)
+        t += fmt::format("  emitter {}: {} particles emitted, {} sites blocked\n", e["name"].get<std::string>(),
+                         e["particles_emitted"].get<std::size_t>(), e["sites_blocked"].get<std::size_t>());
     const std::size_t shown = std::min<std::size_t>(m_warnings.size(), 5);
     for (std::size_t w = 0; w < shown; ++w) t += "  warning: " + m_warnings[w] + "\n";
     if (m_warnings.size() > shown) t += fmt::format("  ... {} more warnings in report.json\n", m_warnings.size() - shown);

@@ -13,6 +13,7 @@ namespace ganache {
 struct Scene;
 struct SolverStats;
 struct BodyReport;
+struct EmitterReport;
 
 /// One pipeline stage as it ran (or did not).
 struct StageRecord {
@@ -36,6 +37,8 @@ public:
                        std::size_t finalFluid);
     /// The fluid's force and torque on each boundary body.
     void setBodies(const std::vector<std::string>& names, const std::vector<BodyReport>& bodies);
+    /// What each emitter added.
+    void setEmitters(const std::vector<EmitterReport>& emitters);
     /// Free-form facts a stage measured (e.g. the initial density error of the sample).
     nlohmann::ordered_json& measurements() { return m_measurements; }
 
@@ -54,6 +57,7 @@ private:
     std::vector<std::string> m_warnings;
     nlohmann::ordered_json m_simulation;  // empty until the simulate stage ran
     nlohmann::ordered_json m_bodies = nlohmann::ordered_json::array();
+    nlohmann::ordered_json m_emitters = nlohmann::ordered_json::array();
     nlohmann::ordered_json m_measurements = nlohmann::ordered_json::object();
 };
 

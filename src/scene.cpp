@@ -1,6 +1,7 @@
 #include "scene.h"
 
 #include "checksum.h"
+#include "emitter.h"
 
 #include <fmt/format.h>
 
@@ -109,6 +110,31 @@ FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& c
     return f;
 }
 
+// `motion:` of a boundary body or an emitter: rotation about an axis and keyframed translation.
+BodyMotion readMotion(Section m) {
+    BodyMotion mo;
+    if (auto rot = m.child("rotation")) {
+        const Vec3 axis = rot->vec3("axis", mo.axis, "unit vector");
+        if (axis.norm() < 1e-12)
+            rot->fail("axis", rot->path() + ".axis must not be the zero vector", "e.g. `axis: [0, 1, 0]`");
+        mo.axis = axis.normalized();
+        mo.centre = rot->vec3("centre", mo.centre, "m");
+        mo.angularVelocity = rot->number("angular_velocity", std::nullopt, "rad/s");
+        rot->rejectUnused();
+    }
+    for (Section& k : m.list("keyframes")) {
+        const Real t = k.number("time", std::nullopt, "s", Bounds::nonNegative());
+        if (!mo.keyframes.empty() && !(t > mo.keyframes.back().first))
+            k.fail("time", fmt::format("{}.time ({} s) must come after the previous keyframe ({} s)", k.path(),
+                                       formatNumber(t), formatNumber(mo.keyframes.back().first)),
+                   "list keyframes in increasing time");
+        mo.keyframes.emplace_back(t, k.vec3("offset", std::nullopt, "m"));
+        k.rejectUnused();
+    }
+    m.rejectUnused();
+    return mo;
+}
+
 BoundarySpec readBoundary(Section s, std::size_t index) {
     BoundarySpec b;
     b.at = s.where();
@@ -133,30 +159,62 @@ BoundarySpec readBoundary(Section s, std::size_t index) {
         ps.rejectUnused();
         b.shape = plane;
     }
-    if (auto m = s.child("motion")) {
-        BodyMotion& mo = b.motion;
-        if (auto rot = m->child("rotation")) {
-            const Vec3 axis = rot->vec3("axis", mo.axis, "unit vector");
-            if (axis.norm() < 1e-12)
-                rot->fail("axis", rot->path() + ".axis must not be the zero vector", "e.g. `axis: [0, 1, 0]`");
-            mo.axis = axis.normalized();
-            mo.centre = rot->vec3("centre", mo.centre, "m");
-            mo.angularVelocity = rot->number("angular_velocity", std::nullopt, "rad/s");
-            rot->rejectUnused();
-        }
-        for (Section& k : m->list("keyframes")) {
-            const Real t = k.number("time", std::nullopt, "s", Bounds::nonNegative());
-            if (!mo.keyframes.empty() && !(t > mo.keyframes.back().first))
-                k.fail("time", fmt::format("{}.time ({} s) must come after the previous keyframe ({} s)", k.path(),
-                                           formatNumber(t), formatNumber(mo.keyframes.back().first)),
-                       "list keyframes in increasing time");
-            mo.keyframes.emplace_back(t, k.vec3("offset", std::nullopt, "m"));
-            k.rejectUnused();
-        }
-        m->rejectUnused();
-    }
+    if (auto m = s.child("motion")) b.motion = readMotion(*m);
     s.rejectUnused();
     return b;
+}
+
+EmitterSpec readEmitter(Section s, std::size_t index, const Scene& scene, const std::vector<Material>& custom) {
+    EmitterSpec e;
+    e.at = s.where();
+    e.name = s.name("name", fmt::format("emitter{}", index));
+    e.material = findMaterial(s, custom);
+    if (pickShape(s, {"circle", "rectangle"}) == "circle") {
+        Section c = *s.child("circle");
+        e.nozzle = CircleNozzle{c.positive("radius", std::nullopt, "m")};
+        c.rejectUnused();
+    } else {
+        Section rs = *s.child("rectangle");
+        RectangleNozzle rect;
+        rect.width = rs.positive("width", std::nullopt, "m");
+        rect.height = rs.positive("height", std::nullopt, "m");
+        rs.rejectUnused();
+        e.nozzle = rect;
+    }
+    e.position = s.vec3("position", std::nullopt, "m");
+    const Vec3 dir = s.vec3("direction", e.direction, "unit vector");
+    if (dir.norm() < 1e-12)
+        s.fail("direction", s.path() + ".direction must not be the zero vector", "e.g. `direction: [0, -1, 0]`");
+    e.direction = dir.normalized();
+    e.speed = s.positive("speed", std::nullopt, "m/s");
+    e.start = s.number("start", e.start, "s", Bounds::nonNegative());
+    e.end = s.number("end", scene.frames.timeOf(scene.frames.end), "s (default: the last frame)", Bounds::nonNegative());
+    if (!(e.end > e.start))
+        s.fail("end", fmt::format("{}.end ({} s) must come after start ({} s)", s.path(), formatNumber(e.end),
+                                  formatNumber(e.start)),
+               "make end later than start");
+    if (auto m = s.child("motion")) e.motion = readMotion(*m);
+    s.rejectUnused();
+
+    if (nozzleSites(e, scene.particleRadius).empty())
+        s.fail(s.has("circle") ? "circle" : "rectangle",
+               fmt::format("the nozzle of emitter '{}' is narrower than one particle (diameter {} m at {} quality)",
+                           e.name, formatNumber(2 * scene.particleRadius), scene.quality.str()),
+               "widen the nozzle (a circle needs radius >= r, a rectangle sides >= 2r) or use a finer --quality");
+    // Where the nozzle is at its start, its end and each keyframe between.
+    std::vector<Real> times{e.start, e.end};
+    for (const auto& [t, offset] : e.motion.keyframes)
+        if (t > e.start && t < e.end) times.push_back(t);
+    std::sort(times.begin(), times.end());
+    for (Real t : times) {
+        const Vec3 p = e.motion.transform(e.position, t);
+        if ((p.array() < scene.domainMin.array()).any() || (p.array() > scene.domainMax.array()).any())
+            s.fail("position", fmt::format("emitter '{}' is outside the domain at t = {} s (at [{}, {}, {}])", e.name,
+                                           formatNumber(t), formatNumber(p.x()), formatNumber(p.y()),
+                                           formatNumber(p.z())),
+                   "move the emitter (or its keyframes) inside domain.min/max, or enlarge the domain");
+    }
+    return e;
 }
 
 std::pair<Vec3, Vec3> boundsOf(const FluidShape& shape) {
@@ -177,6 +235,11 @@ Vec3 BodyMotion::offset(Real t) const {
             return a + (t - t0) / (t1 - t0) * (b - a);
         }
     return keyframes.back().second;
+}
+
+Mat3 BodyMotion::rotation(Real t) const {
+    if (angularVelocity == 0) return Mat3::Identity();
+    return Eigen::AngleAxis<Real>(angularVelocity * t, axis).toRotationMatrix();
 }
 
 Vec3 BodyMotion::translationVelocity(Real t) const {
@@ -205,6 +268,13 @@ const EffectSpec* Scene::findEffect(const std::string& effectName) const {
     return nullptr;
 }
 
+std::vector<Material> Scene::sourceMaterials() const {
+    std::vector<Material> out;
+    for (const auto& f : fluids) out.push_back(f.material);
+    for (const auto& e : emitters) out.push_back(e.material);
+    return out;
+}
+
 Real estimateFluidParticles(const Scene& scene, Real radius) {
     const Real cell = std::pow(2 * radius, 3);
     Real n = 0;
@@ -212,6 +282,9 @@ Real estimateFluidParticles(const Scene& scene, Real radius) {
         if (auto* b = std::get_if<BoxShape>(&f.shape)) n += (b->max - b->min).prod() / cell;
         else n += 4.0 / 3.0 * M_PI * std::pow(std::get<SphereShape>(f.shape).radius, 3) / cell;
     }
+    const Real lastFrame = scene.frames.timeOf(scene.frames.end);
+    for (const auto& e : scene.emitters)
+        n += emitterFlowRate(e, radius) * std::max<Real>(0, std::min(e.end, lastFrame) - e.start) / cell;
     return n;
 }
 
@@ -272,9 +345,14 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
 
     const std::vector<Material> custom = readMaterials(root.child("materials"));
     auto fluids = root.list("fluids");
-    if (fluids.empty())
-        root.fail("fluids", "the scene has no fluid", "add `fluids:` with at least one entry, e.g. "
-                                                      "`- {name: block, box: {min: [0, 0, 0], max: [0.1, 0.1, 0.1]}}`");
+    auto emitters = root.list("emitters");
+    if (fluids.empty() && emitters.empty()) {
+        const std::string what = "the scene has no fluid and no emitter";
+        const std::string fix = "add `fluids:` with at least one entry, e.g. "
+                                "`- {name: block, box: {min: [0, 0, 0], max: [0.1, 0.1, 0.1]}}`, or an `emitters:` list";
+        if (root.has("fluids")) root.fail("fluids", what, fix);
+        root.failMissing("fluids", what, fix);
+    }
     for (std::size_t i = 0; i < fluids.size(); ++i) {
         scene.fluids.push_back(readFluid(fluids[i], i, custom));
         const auto [lo, hi] = boundsOf(scene.fluids.back().shape);
@@ -285,6 +363,8 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     }
     auto boundaries = root.list("boundaries");
     for (std::size_t i = 0; i < boundaries.size(); ++i) scene.boundaries.push_back(readBoundary(boundaries[i], i));
+    for (std::size_t i = 0; i < emitters.size(); ++i)
+        scene.emitters.push_back(readEmitter(emitters[i], i, scene, custom));
 
     {
         Section sim = root.section("simulation");
@@ -339,6 +419,10 @@ std::string explainScene(const Scene& scene) {
         header += fmt::format("# fluid '{}': material {} (density {} kg/m^3, mu {} Pa s; {})\n", f.name,
                               f.material.name, formatNumber(f.material.density), formatNumber(f.material.mu),
                               f.material.source);
+    for (const auto& e : scene.emitters)
+        header += fmt::format("# emitter '{}': material {}, {} particles per layer, {} m^3/s at this quality\n", e.name,
+                              e.material.name, nozzleSites(e, scene.particleRadius).size(),
+                              formatNumber(emitterFlowRate(e, scene.particleRadius)));
     return header + effectiveYaml(*scene.effective);
 }
 

@@ -79,6 +79,14 @@ struct BodyMotion {
     Vec3 offset(Real t) const;
     /// Translation velocity at time t [m/s].
     Vec3 translationVelocity(Real t) const;
+    /// The rotation the motion has applied by time t.
+    Mat3 rotation(Real t) const;
+    /// Where a point at x0 at t = 0 is at time t.
+    Vec3 transform(const Vec3& x0, Real t) const { return centre + offset(t) + rotation(t) * (x0 - centre); }
+    /// Velocity at time t of the moving point that is at x then [m/s].
+    Vec3 velocity(const Vec3& x, Real t) const {
+        return angularVelocity * axis.cross(x - centre - offset(t)) + translationVelocity(t);
+    }
 };
 
 /// A solid the fluid cannot pass, made of boundary particles (Akinci et al. 2012); static unless it has a
@@ -86,6 +94,31 @@ struct BodyMotion {
 struct BoundarySpec {
     std::string name;
     BoundaryShape shape;
+    BodyMotion motion;
+    Location at;
+};
+
+/// The opening of an emitter, in the plane across its direction.
+struct CircleNozzle {
+    Real radius = 0;  ///< [m]
+};
+/// width runs along x (along z when the emitter points along x), height across both [m].
+struct RectangleNozzle {
+    Real width = 0, height = 0;
+};
+using NozzleShape = std::variant<CircleNozzle, RectangleNozzle>;
+
+/// A nozzle that adds fluid between `start` and `end`: layers of particles (lattice spacing 2r) leave the
+/// opening at `speed` along `direction`. Its position and direction follow `motion` (rotation and keyframes,
+/// as for boundary bodies); the emitted fluid also takes the nozzle's own velocity.
+struct EmitterSpec {
+    std::string name;
+    Material material;
+    NozzleShape nozzle;
+    Vec3 position = Vec3::Zero();     ///< centre of the opening at t = 0 [m]
+    Vec3 direction = -Vec3::UnitY();  ///< unit length
+    Real speed = 0;                   ///< [m/s], > 0
+    Real start = 0, end = 0;          ///< emission times [s]; end defaults to the last frame's time
     BodyMotion motion;
     Location at;
 };
@@ -124,6 +157,7 @@ struct Scene {
 
     std::vector<FluidSpec> fluids;
     std::vector<BoundarySpec> boundaries;
+    std::vector<EmitterSpec> emitters;
     std::vector<EffectSpec> effects;
 
     TimeStepSettings timeStep;
@@ -135,12 +169,16 @@ struct Scene {
     std::shared_ptr<const EffectiveScene> effective;  ///< every value read, defaults included
 
     const EffectSpec* findEffect(const std::string& name) const;
+    /// The material of every source of fluid: the fluids, then the emitters. A particle's `fluid` attribute
+    /// (present when there are several sources) indexes this list.
+    std::vector<Material> sourceMaterials() const;
 };
 
 /// Loads and validates a scene; throws SceneError (file:line:col, what, fix) or InputError.
 Scene loadScene(const std::filesystem::path& file, const Quality& quality);
 
-/// Fluid particles the scene's shapes hold at `radius` on a lattice of spacing 2 radius (an estimate).
+/// Fluid particles the scene's shapes hold at `radius` on a lattice of spacing 2 radius, plus what its emitters
+/// add by the last frame (an estimate).
 Real estimateFluidParticles(const Scene& scene, Real radius);
 
 /// `ganache scene --explain`: the effective scene as YAML with units and a header naming the quality.

@@ -25,6 +25,7 @@ void SolverStats::warn(std::string text) {
 Simulation::Simulation(const Scene& scene, ParticleSet fluid, const std::vector<BoundaryBody>& bodies)
     : m_particleRadius(scene.particleRadius),
       m_kernel(supportRadiusFor(scene.particleRadius)),
+      m_latticeSum(latticeKernelSum(2 * scene.particleRadius, m_kernel)),
       m_domainMin(scene.domainMin),
       m_domainMax(scene.domainMax),
       m_timeStep(scene.timeStep),
@@ -34,9 +35,8 @@ Simulation::Simulation(const Scene& scene, ParticleSet fluid, const std::vector<
       m_fluidGrid(m_kernel.supportRadius()),
       m_boundaryGrid(m_kernel.supportRadius()) {
     // Every particle was sampled on the lattice of spacing 2r, so its mass says its rest density.
-    const Real latticeSum = latticeKernelSum(2 * m_particleRadius, m_kernel);
     m_restDensity = &m_fluid.addScalar("_rest_density", 0, false);
-    for (std::size_t i = 0; i < m_fluid.size(); ++i) (*m_restDensity)[i] = m_fluid.mass()[i] * latticeSum;
+    for (std::size_t i = 0; i < m_fluid.size(); ++i) (*m_restDensity)[i] = m_fluid.mass()[i] * m_latticeSum;
 
     for (std::size_t b = 0; b < bodies.size(); ++b) {
         m_boundary.names.push_back(bodies[b].name);
@@ -61,6 +61,11 @@ Simulation::Simulation(const Scene& scene, ParticleSet fluid, const std::vector<
     m_pressure = std::make_unique<PressureDFSPH>(m_pressureSettings, m_fluid);
     m_effects = makeEffects(scene, m_fluid);
     for (const auto& e : scene.effects) m_effectNames.push_back(e.name);
+    if (!scene.emitters.empty()) {
+        m_emitters = std::make_unique<Emitters>(scene, m_particleRadius);
+        m_effectNames.push_back("emitters");
+        for (std::uint64_t id : m_fluid.id()) m_nextId = std::max(m_nextId, id + 1);
+    }
 
     updateNeighbours();
     computeDensities();
@@ -83,12 +88,14 @@ void Simulation::moveBoundaries(Real t) {
     for (std::size_t k = 0; k < b.x.size(); ++k) {
         const BodyMotion& m = b.motion[b.body[k]];
         if (m.isStatic()) continue;
-        const Vec3 centre = m.centre + m.offset(t);
-        const Mat3 rotation = Eigen::AngleAxis<Real>(m.angularVelocity * t, m.axis).toRotationMatrix();
-        b.x[k] = centre + rotation * (b.x0[k] - m.centre);
-        b.v[k] = m.angularVelocity * m.axis.cross(b.x[k] - centre) + m.translationVelocity(t);
+        b.x[k] = m.transform(b.x0[k], t);
+        b.v[k] = m.velocity(b.x[k], t);
     }
     m_boundaryGrid.build(b.x);
+}
+
+std::vector<EmitterReport> Simulation::emitterReports() const {
+    return m_emitters ? m_emitters->reports() : std::vector<EmitterReport>{};
 }
 
 std::vector<BodyReport> Simulation::bodyReports() const {
@@ -152,16 +159,24 @@ Real Simulation::chooseDt(Real maxDt) const {
 void Simulation::removeEscaped() {
     const auto& x = m_fluid.x();
     std::vector<std::uint8_t> out(x.size());
-    std::size_t count = 0;
+    std::size_t count = 0, first = x.size();
     for (std::size_t i = 0; i < x.size(); ++i) {
         out[i] = (x[i].array() < m_domainMin.array()).any() || (x[i].array() > m_domainMax.array()).any();
         count += out[i];
+        if (out[i] && first == x.size()) first = i;
     }
     if (count == 0) return;
+    std::string side;
+    for (int a = 0; a < 3 && side.empty(); ++a) {
+        if (x[first][a] < m_domainMin[a]) side = fmt::format("{} min", "xyz"[a]);
+        if (x[first][a] > m_domainMax[a]) side = fmt::format("{} max", "xyz"[a]);
+    }
+    m_stats.warn(fmt::format("step {} (t = {:.4f} s): {} particle(s) left the domain and were removed (the first, id "
+                             "{}, through the {} side at [{:.4g}, {:.4g}, {:.4g}] m)",
+                             m_step, m_time, count, m_fluid.id()[first], side, x[first].x(), x[first].y(),
+                             x[first].z()));
     m_fluid.removeIf(out);
     m_stats.removedParticles += count;
-    m_stats.warn(fmt::format("step {} (t = {:.4f} s): {} particle(s) left the domain and were removed", m_step, m_time,
-                             count));
 }
 
 void Simulation::checkFinite(const char* stage) {
@@ -218,6 +233,14 @@ void Simulation::step(Real maxDt) {
         const auto& v = m_fluid.v();
         forEachParticle(x.size(), [&](std::size_t i) { x[i] += dt * v[i]; }, 4096);
         removeEscaped();
+    }
+    if (m_emitters) {
+        ScopedTimer t(m_stats.time.emit);
+        const std::size_t before = m_fluid.size();
+        m_emitters->emit(m_time, dt, m_fluid, m_nextId, m_stats);
+        // Emitted layers sit on the sampler's lattice, so their masses say their rest density, as at the start.
+        for (std::size_t i = before; i < m_fluid.size(); ++i) (*m_restDensity)[i] = m_fluid.mass()[i] * m_latticeSum;
+        m_stats.emittedParticles += m_fluid.size() - before;
     }
     {
         ScopedTimer t(m_stats.time.neighbours);

@@ -3,10 +3,12 @@
 // Algorithm 1 of Weiler et al. 2018:
 //   forces (gravity, ...) -> CFL time step -> constant-density solve [BK17] -> advection -> neighbour search,
 //   densities, DFSPH factors -> divergence-free solve [BK17] -> viscosity [WKBB18] -> end of step
-// With n > 0 (default 2) the constant-density solve and the viscosity solve alternate n times before advection
-// and the divergence-free solve ends the step.
+// With n > 0 (default 3) the constant-density solve and the viscosity solve alternate n times before advection
+// and the divergence-free solve ends the step. Emitters (when the scene has any) add their layers right after
+// advection, so the neighbour search, densities and factors that follow include the new particles.
 
 #include "effect.h"
+#include "emitter.h"
 #include "kernels.h"
 #include "neighbour_search.h"
 #include "particles.h"
@@ -52,7 +54,8 @@ struct BodyReport {
 
 /// Wall time [s] spent in each part of the step, summed over the steps.
 struct StageTimes {
-    double forces = 0, pressure = 0, advect = 0, neighbours = 0, divergence = 0, viscosity = 0, endOfStep = 0;
+    double forces = 0, pressure = 0, advect = 0, emit = 0, neighbours = 0, divergence = 0, viscosity = 0, endOfStep = 0;
+    double total() const { return forces + pressure + advect + emit + neighbours + divergence + viscosity + endOfStep; }
 };
 
 /// What the solvers did, summed over the steps, and what went wrong.
@@ -63,6 +66,7 @@ struct SolverStats {
     std::size_t viscositySolves = 0, viscosityIterations = 0, viscosityCapHits = 0;
     Real viscosityWorstResidual = 0;  ///< largest relative residual a viscosity solve ended with
     std::size_t removedParticles = 0;  ///< left the domain
+    std::size_t emittedParticles = 0;  ///< added by emitters
     Real dtMin = std::numeric_limits<Real>::infinity(), dtMax = 0;
     StageTimes time;
     std::vector<std::string> warnings;  ///< the first kMaxWarnings, then only counted
@@ -110,6 +114,8 @@ public:
     const std::vector<std::string>& effectNames() const { return m_effectNames; }
     /// The fluid's force and torque on each body so far.
     std::vector<BodyReport> bodyReports() const;
+    /// What each emitter added so far (empty when the scene has none).
+    std::vector<EmitterReport> emitterReports() const;
 
 private:
     StepContext context(Real dt);
@@ -122,6 +128,7 @@ private:
 
     Real m_particleRadius;
     CubicSpline m_kernel;
+    Real m_latticeSum;  // sum of W over the sampling lattice: a lattice particle of mass m has density m times this
     Vec3 m_domainMin, m_domainMax;
     TimeStepSettings m_timeStep;
     PressureSettings m_pressureSettings;
@@ -135,6 +142,8 @@ private:
     std::vector<Real>* m_restDensity;  // a particle attribute, so it moves with reordering and removal
 
     std::unique_ptr<PressureDFSPH> m_pressure;
+    std::unique_ptr<Emitters> m_emitters;  // only when the scene has emitters
+    std::uint64_t m_nextId = 0;            // id of the next emitted particle
     std::vector<std::vector<std::unique_ptr<Effect>>> m_effects;  // by Stage
     std::vector<std::string> m_effectNames;
 

@@ -42,18 +42,24 @@ ViscosityWeiler2018::ViscosityWeiler2018(const ViscosityParams& params, const Sc
         m_mu = *params.mu;
         return;
     }
+    const std::vector<Material> sources = scene.sourceMaterials();
     std::set<Real> distinct;
-    for (const auto& f : scene.fluids) distinct.insert(f.material.mu);
-    m_mu = scene.fluids.front().material.mu;
+    for (const auto& m : sources) distinct.insert(m.mu);
+    m_mu = sources.front().mu;
     if (distinct.size() == 1) return;
-    // Fluids of different viscosity: each particle carries its own, from the fluid it was sampled from.
-    const std::vector<Real>* fluidIndex = particles.findScalar("fluid");
-    if (!fluidIndex)
+    // Fluids of different viscosity: each particle carries its own, from the fluid or emitter it came from.
+    if (!particles.findScalar("fluid"))
         throw std::runtime_error("viscosity: the particles do not say which fluid they belong to; sample the scene "
                                  "again with this version of ganache");
+    for (const auto& m : sources) m_sourceMu.push_back(m.mu);
     m_muPerParticle = &particles.addScalar("viscosity");
-    for (std::size_t i = 0; i < particles.size(); ++i)
-        (*m_muPerParticle)[i] = scene.fluids.at(std::size_t((*fluidIndex)[i])).material.mu;
+    refreshViscosity(particles);
+}
+
+void ViscosityWeiler2018::refreshViscosity(const ParticleSet& particles) {
+    const auto& source = *particles.findScalar("fluid");
+    auto& mu = *m_muPerParticle;
+    forEachParticle(particles.size(), [&](std::size_t i) { mu[i] = m_sourceMu.at(std::size_t(source[i])); }, 4096);
 }
 
 Real ViscosityWeiler2018::pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
@@ -102,6 +108,7 @@ void ViscosityWeiler2018::apply(StepContext& ctx, ParticleSet& particles) {
     const Real dt = ctx.dt;
     const bool sticky = m_params.boundaryMu > 0;
     for (auto* a : {&m_b, &m_x, &m_r, &m_z, &m_p, &m_q}) a->resize(n);
+    if (m_muPerParticle) refreshViscosity(particles);  // emitters may have added particles since the last solve
     // With coupled passes the solve runs several times a step, each on the velocity the latest pressure solve
     // left. A later pass first takes back the previous pass's change dv (a pass replaces it, it does not add a
     // second dt of viscosity) and starts from v + dv, which is the current velocity. The first pass of a step

@@ -29,12 +29,14 @@ private:
                          const Vec3& xij) const;
     Real boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k, const Vec3& xik) const;
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles) const;
+    void refreshViscosity(const ParticleSet& particles);  // mu of each particle from its `fluid` attribute
     void multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out) const;
 
     ViscosityParams m_params;
     Real m_mu = 0;
     std::vector<Real>* m_muPerParticle = nullptr;  // attribute `viscosity`, only when viscosities differ
+    std::vector<Real> m_sourceMu;                  // mu of each fluid and emitter, when they differ
     std::vector<Vec3>* m_dv;                       // attribute `_viscosity_dv`: the last pass's change
     std::vector<Vec3> m_b, m_x, m_r, m_z, m_p, m_q;
     std::vector<Mat3> m_inverseDiagonal;

@@ -52,10 +52,14 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
     m["initial_density_error"] = {{"max_compression", sample.density.maxCompression},
                                   {"mean_interior", sample.density.meanInterior},
                                   {"interior_particles", sample.density.interiorCount}};
-    if (sample.fluid.empty())
-        throw InputError(fmt::format("{}: the fluids hold no lattice site at particle radius {} m\n  fix: make the "
-                                     "fluid shapes larger than one particle diameter or use a finer --quality",
-                                     scene.file.string(), formatNumber(scene.particleRadius)));
+    for (std::size_t f = 0; f < scene.fluids.size(); ++f)
+        if (sample.fluidCounts[f] == 0)
+            throw SceneError(scene.fluids[f].at,
+                             fmt::format("fluid '{}' holds no particle at particle radius {} m (its lattice sites are "
+                                         "all outside it, inside an earlier fluid or too close to a boundary)",
+                                         scene.fluids[f].name, formatNumber(scene.particleRadius)),
+                             "make the fluid larger than one particle diameter, move it away from the boundaries, or "
+                             "use a finer --quality");
 
     CacheInfo info{scene.name, scene.frames.start, 0.0, scene.frames.fps, scene.particleRadius};
     writeParticleCache(layout.sample(), sample.fluid, sample.boundaries, info);
@@ -109,6 +113,7 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     progress.finish();
     report.setSimulation(sim.stats(), sim.time(), sim.effectNames(), sim.particles().size());
     report.setBodies(sim.boundary().names, sim.bodyReports());
+    report.setEmitters(sim.emitterReports());
     stage.seconds = clock.seconds();
     const SolverStats& s = sim.stats();
     stage.note = fmt::format("{} steps to t = {:.3f} s, {} frames written{}", s.steps, sim.time(),
@@ -184,9 +189,9 @@ void sceneCommand(const RunOptions& options, bool explain) {
         fmt::print("{}", explainScene(scene));
         return;
     }
-    fmt::print("{}: scene '{}' is valid: {} fluid(s), {} boundary(ies), effects: {}; about {:.3g} fluid particles "
-               "at {} quality (r = {} m)\n",
-               scene.file.string(), scene.name, scene.fluids.size(), scene.boundaries.size(),
+    fmt::print("{}: scene '{}' is valid: {} fluid(s), {} boundary(ies), {} emitter(s), effects: {}; about {:.3g} fluid "
+               "particles at {} quality (r = {} m)\n",
+               scene.file.string(), scene.name, scene.fluids.size(), scene.boundaries.size(), scene.emitters.size(),
                scene.effects.empty() ? std::string("none") : [&] {
                    std::vector<std::string> names;
                    for (const auto& e : scene.effects) names.push_back(e.name);

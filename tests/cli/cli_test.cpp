@@ -1,5 +1,7 @@
 // Runs the real `ganache` program: exit codes, messages, outputs and report.json.
 
+#include "cache.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -21,7 +23,7 @@ struct Result {
     std::string output;  // stdout and stderr together
 };
 
-Result ganache(const std::string& args) {
+Result runGanache(const std::string& args) {
     const std::string cmd = std::string(GANACHE_EXE) + " " + args + " 2>&1";
     FILE* pipe = popen(cmd.c_str(), "r");
     std::string out;
@@ -43,19 +45,19 @@ const std::string kTiny = (kSource / "tests/scenes/tiny.yaml").string();
 }  // namespace
 
 TEST(Cli, HelpForEveryCommand) {
-    EXPECT_EQ(ganache("--help").code, 0);
+    EXPECT_EQ(runGanache("--help").code, 0);
     for (const char* c : {"run", "sample", "simulate", "surface", "render", "scene"}) {
-        const Result r = ganache(std::string(c) + " --help");
+        const Result r = runGanache(std::string(c) + " --help");
         EXPECT_EQ(r.code, 0) << c;
         EXPECT_NE(r.output.find("--quality"), std::string::npos) << c;
     }
-    EXPECT_EQ(ganache("").code, 2);  // a command is required
-    EXPECT_EQ(ganache("frobnicate").code, 2);
+    EXPECT_EQ(runGanache("").code, 2);  // a command is required
+    EXPECT_EQ(runGanache("frobnicate").code, 2);
 }
 
 TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
     const fs::path out = freshDir("run");
-    const Result r = ganache("run " + kTiny + " --out " + out.string() + " --threads 2");
+    const Result r = runGanache("run " + kTiny + " --out " + out.string() + " --threads 2");
     ASSERT_EQ(r.code, 0) << r.output;
     EXPECT_TRUE(fs::exists(out / "sample/tiny.vdb"));
     for (int f = 1; f <= 5; ++f) EXPECT_TRUE(fs::exists(out / ("particles/tiny.000" + std::to_string(f) + ".vdb"))) << f;
@@ -86,16 +88,36 @@ TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
         EXPECT_EQ(e.path().string().find(".tmp-"), std::string::npos) << e.path();
 }
 
+TEST(Cli, AnEmitterOnlySceneStartsEmptyAndFills) {
+    const fs::path out = freshDir("pour");
+    const Result r = runGanache("run " + (kSource / "tests/scenes/pour.yaml").string() + " --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.output;
+    // Frame 1 (t = 0) holds no fluid yet: a valid empty cache, not a missing file.
+    const auto first = ganache::readParticleCache(out / "particles/pour.0001.vdb");
+    EXPECT_EQ(first.fluid.size(), 0u);
+    const auto last = ganache::readParticleCache(out / "particles/pour.0004.vdb");
+    EXPECT_GT(last.fluid.size(), 0u);
+
+    std::ifstream in(out / "report.json");
+    const auto report = nlohmann::json::parse(in);
+    EXPECT_EQ(report["effects_ran"], nlohmann::json({"gravity", "viscosity", "emitters"}));
+    ASSERT_EQ(report["emitters"].size(), 1u);
+    EXPECT_EQ(report["emitters"][0]["name"], "nozzle");
+    EXPECT_EQ(report["emitters"][0]["particles_emitted"].get<std::size_t>(),
+              last.fluid.size() + report["simulation"]["particles_removed"].get<std::size_t>());
+    EXPECT_GT(report["per_step_ms"]["emit"].get<double>(), 0.0);
+}
+
 TEST(Cli, SimulateNeedsTheSample) {
     const fs::path out = freshDir("simulate_alone");
-    const Result r = ganache("simulate " + kTiny + " --out " + out.string());
+    const Result r = runGanache("simulate " + kTiny + " --out " + out.string());
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.output.find("ganache sample"), std::string::npos) << r.output;
 }
 
 TEST(Cli, FramesLimitWhatIsWritten) {
     const fs::path out = freshDir("frames");
-    const Result r = ganache("run " + kTiny + " --frames 3-4 --out " + out.string());
+    const Result r = runGanache("run " + kTiny + " --frames 3-4 --out " + out.string());
     ASSERT_EQ(r.code, 0) << r.output;
     EXPECT_FALSE(fs::exists(out / "particles/tiny.0002.vdb"));
     EXPECT_TRUE(fs::exists(out / "particles/tiny.0003.vdb"));
@@ -105,37 +127,37 @@ TEST(Cli, FramesLimitWhatIsWritten) {
 
 TEST(Cli, MissingStagesSaySoAndFail) {
     const fs::path out = freshDir("surface");
-    const Result r = ganache("surface " + kTiny + " --out " + out.string());
+    const Result r = runGanache("surface " + kTiny + " --out " + out.string());
     EXPECT_EQ(r.code, 1);
     EXPECT_NE(r.output.find("not part of this build"), std::string::npos) << r.output;
 }
 
 TEST(Cli, BadInputExitsWithTwoAndSaysWhere) {
     const fs::path broken = kSource / "tests/scenes/broken/negative_radius.yaml";
-    Result r = ganache("run " + broken.string() + " --out " + freshDir("broken").string());
+    Result r = runGanache("run " + broken.string() + " --out " + freshDir("broken").string());
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.output.find(broken.string() + ":4:21:"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("fix:"), std::string::npos);
 
-    EXPECT_EQ(ganache("run no/such/scene.yaml").code, 2);
-    EXPECT_EQ(ganache("run " + kTiny + " --quality best").code, 2);
-    EXPECT_EQ(ganache("run " + kTiny + " --frames 4-2").code, 2);
-    EXPECT_EQ(ganache("run " + kTiny + " --frames 1-99").code, 2);
-    EXPECT_EQ(ganache("run " + kTiny + " --frames x").code, 2);
-    EXPECT_EQ(ganache("run " + kTiny + " --threads -3").code, 2);
-    r = ganache("run " + kTiny + " --resume --out " + freshDir("resume").string());
+    EXPECT_EQ(runGanache("run no/such/scene.yaml").code, 2);
+    EXPECT_EQ(runGanache("run " + kTiny + " --quality best").code, 2);
+    EXPECT_EQ(runGanache("run " + kTiny + " --frames 4-2").code, 2);
+    EXPECT_EQ(runGanache("run " + kTiny + " --frames 1-99").code, 2);
+    EXPECT_EQ(runGanache("run " + kTiny + " --frames x").code, 2);
+    EXPECT_EQ(runGanache("run " + kTiny + " --threads -3").code, 2);
+    r = runGanache("run " + kTiny + " --resume --out " + freshDir("resume").string());
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.output.find("no checkpoints"), std::string::npos) << r.output;
 }
 
 TEST(Cli, SceneExplainPrintsAValidScene) {
-    const Result r = ganache("scene " + kTiny + " --explain");
+    const Result r = runGanache("scene " + kTiny + " --explain");
     ASSERT_EQ(r.code, 0) << r.output;
     EXPECT_NE(r.output.find("fps: 10"), std::string::npos);
     EXPECT_NE(r.output.find("acceleration: [0, -9.81, 0]  # m/s^2"), std::string::npos) << r.output;
     const fs::path again = freshDir("explain") / "again.yaml";
     std::ofstream(again) << r.output;
-    const Result check = ganache("scene " + again.string());
+    const Result check = runGanache("scene " + again.string());
     EXPECT_EQ(check.code, 0) << check.output;
     EXPECT_NE(check.output.find("is valid"), std::string::npos);
 }

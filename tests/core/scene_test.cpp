@@ -110,7 +110,8 @@ TEST(Scene, ReadsEveryPartOfTheTinyScene) {
 }
 
 TEST(Scene, ExplainedSceneLoadsBackToTheSameEffectiveScene) {
-    for (const fs::path& file : {kSource / "tests/scenes/tiny.yaml", kSource / "scenes/dam_break.yaml"}) {
+    for (const fs::path& file :
+         {kSource / "tests/scenes/tiny.yaml", kSource / "tests/scenes/pour.yaml", kSource / "scenes/dam_break.yaml"}) {
         const Scene s = loadScene(file, Quality::parse("final"));
         const std::string text = explainScene(s);
         EXPECT_NE(text.find("radius: 0."), std::string::npos);

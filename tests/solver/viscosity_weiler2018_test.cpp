@@ -164,6 +164,10 @@ TEST(Effects, OnlyWhatTheSceneAsksForExists) {
     EXPECT_EQ(a.particles().findVector("_viscosity_dv"), nullptr);
     EXPECT_EQ(a.particles().findScalar("viscosity"), nullptr);
     EXPECT_EQ(a.stats().viscositySolves, 0u);
+    // No emitters: none built, nothing timed, nothing reported.
+    EXPECT_EQ(a.effectNames(), std::vector<std::string>{"gravity"});
+    EXPECT_TRUE(a.emitterReports().empty());
+    EXPECT_EQ(a.stats().time.emit, 0.0);
 
     // One viscosity for every fluid: the warm-start array, but no per-particle viscosity.
     const Scene viscous = sceneFromText("viscous", std::string(kFreeBlock) + "effects: {viscosity: {}}\n");
