@@ -5,22 +5,34 @@
 #include "parallel.h"
 #include "progress.h"
 
+#include "inside.h"
+
 #include <cmath>
+#include <unordered_map>
 #include <variant>
 
 namespace ganache {
 
 namespace {
 
-bool contains(const FluidShape& shape, const Vec3& x) {
-    if (auto* b = std::get_if<BoxShape>(&shape))
-        return (x.array() >= b->min.array()).all() && (x.array() <= b->max.array()).all();
-    const auto& s = std::get<SphereShape>(shape);
-    return (x - s.centre).squaredNorm() <= s.radius * s.radius;
+// For every point, 1 when the fluid shape holds it.
+std::vector<std::uint8_t> insideShape(const FluidShape& shape, const std::vector<Vec3>& x, Real r) {
+    if (auto* m = std::get_if<MeshShape>(&shape)) return insideMesh(*m, x, r);
+    std::vector<std::uint8_t> in(x.size());
+    for (std::size_t i = 0; i < x.size(); ++i) {
+        if (auto* b = std::get_if<BoxShape>(&shape))
+            in[i] = (x[i].array() >= b->min.array()).all() && (x[i].array() <= b->max.array()).all();
+        else {
+            const auto& sp = std::get<SphereShape>(shape);
+            in[i] = (x[i] - sp.centre).squaredNorm() <= sp.radius * sp.radius;
+        }
+    }
+    return in;
 }
 
 // Lattice sites of spacing d inside the shape. A box holds round(extent / d) sites per axis, centred in it,
-// so that the sampled volume n d^3 matches the box; a sphere's lattice is centred on its centre.
+// so that the sampled volume n d^3 matches the box; a sphere's lattice is centred on its centre, a mesh's on
+// its bounding box.
 std::vector<Vec3> latticeSites(const FluidShape& shape, Real d) {
     std::vector<Vec3> sites;
     if (auto* b = std::get_if<BoxShape>(&shape)) {
@@ -33,15 +45,73 @@ std::vector<Vec3> latticeSites(const FluidShape& shape, Real d) {
                 for (int i = 0; i < n.x(); ++i) sites.push_back(first + d * Vec3(i, j, k));
         return sites;
     }
-    const auto& s = std::get<SphereShape>(shape);
-    const int m = int(std::ceil(s.radius / d));
-    for (int k = -m; k <= m; ++k)
-        for (int j = -m; j <= m; ++j)
-            for (int i = -m; i <= m; ++i) {
-                const Vec3 x = s.centre + d * Vec3(i, j, k);
-                if (contains(shape, x)) sites.push_back(x);
-            }
-    return sites;
+    Vec3 centre, halfExtent;
+    if (auto* m = std::get_if<MeshShape>(&shape)) {
+        const auto [lo, hi] = m->mesh->bounds();
+        centre = 0.5 * (lo + hi);
+        halfExtent = 0.5 * (hi - lo);
+    } else {
+        const auto& sp = std::get<SphereShape>(shape);
+        centre = sp.centre;
+        halfExtent = Vec3::Constant(sp.radius);
+    }
+    const Eigen::Vector3i m = (halfExtent / d).array().ceil().cast<int>();
+    for (int k = -m.z(); k <= m.z(); ++k)
+        for (int j = -m.y(); j <= m.y(); ++j)
+            for (int i = -m.x(); i <= m.x(); ++i) sites.push_back(centre + d * Vec3(i, j, k));
+    const std::vector<std::uint8_t> in = insideShape(shape, sites, d / 2);
+    std::vector<Vec3> kept;
+    for (std::size_t i = 0; i < sites.size(); ++i)
+        if (in[i]) kept.push_back(sites[i]);
+    return kept;
+}
+
+// A deterministic offset in [-1, 1]^3 for site i of fluid f (splitmix64 of the pair).
+Vec3 jitterOffset(std::size_t f, std::size_t i) {
+    std::uint64_t z = (std::uint64_t(f) << 40) ^ std::uint64_t(i);
+    Vec3 out;
+    for (int a = 0; a < 3; ++a) {
+        z += 0x9e3779b97f4a7c15ull;
+        std::uint64_t x = z;
+        x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+        x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+        x ^= x >> 31;
+        out[a] = 2 * (Real(x >> 11) / Real(1ull << 53)) - 1;
+    }
+    return out;
+}
+
+// A mesh's surface with spacing <= r: each triangle carries a triangular grid fine enough for its longest edge;
+// points closer than r/2 to one already taken (shared edges and corners) are dropped.
+std::vector<Vec3> sampleSurface(const TriangleMesh& mesh, Real r) {
+    const Real merge = 0.5 * r;
+    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> cells;
+    auto key = [&](const Eigen::Vector3i& c) {
+        return (std::uint64_t(std::uint32_t(c.x()) & 0x1fffff) << 42) | (std::uint64_t(std::uint32_t(c.y()) & 0x1fffff) << 21) |
+               std::uint64_t(std::uint32_t(c.z()) & 0x1fffff);
+    };
+    std::vector<Vec3> out;
+    auto add = [&](const Vec3& p) {
+        const Eigen::Vector3i c = (p / merge).array().floor().cast<int>();
+        for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    auto it = cells.find(key(c + Eigen::Vector3i(dx, dy, dz)));
+                    if (it == cells.end()) continue;
+                    for (std::uint32_t k : it->second)
+                        if ((out[k] - p).squaredNorm() < merge * merge) return;
+                }
+        cells[key(c)].push_back(std::uint32_t(out.size()));
+        out.push_back(p);
+    };
+    for (const auto& t : mesh.triangles) {
+        const Vec3 &a = mesh.vertices[t[0]], &b = mesh.vertices[t[1]], &c = mesh.vertices[t[2]];
+        const Real longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+        const int n = std::max(1, int(std::ceil(longest / r)));
+        for (int i = 0; i <= n; ++i)
+            for (int j = 0; i + j <= n; ++j) add(a + (b - a) * (Real(i) / n) + (c - a) * (Real(j) / n));
+    }
+    return out;
 }
 
 // Surface grid of a box with spacing <= r: every grid point with an index on a face, top face left out
@@ -183,6 +253,7 @@ Sample sampleScene(const Scene& scene) {
         BoundaryBody body;
         body.name = spec.name;
         if (auto* box = std::get_if<BoxBoundary>(&spec.shape)) body.x = sampleBoxWalls(*box, r);
+        else if (auto* mesh = std::get_if<MeshShape>(&spec.shape)) body.x = sampleSurface(*mesh->mesh, r);
         else body.x = samplePlane(std::get<PlaneBoundary>(spec.shape), scene.domainMin, scene.domainMax, r, h);
         body.volume = boundaryVolumes(body.x, w);
         allBoundary.insert(allBoundary.end(), body.x.begin(), body.x.end());
@@ -214,16 +285,27 @@ Sample sampleScene(const Scene& scene) {
     for (std::size_t f = 0; f < scene.fluids.size(); ++f) {
         const FluidSpec& spec = scene.fluids[f];
         const Real mass = latticeMass(d, spec.material.density, w);
-        std::size_t count = 0;
-        for (const Vec3& x : latticeSites(spec.shape, d)) {
-            bool taken = false;
-            for (std::size_t e = 0; e < f && !taken; ++e) taken = contains(scene.fluids[e].shape, x);
-            if (taken) {
+        const std::vector<Vec3> sites = latticeSites(spec.shape, d);
+        // Sites an earlier fluid holds, or that lie inside a closed solid, are carved.
+        std::vector<std::uint8_t> taken(sites.size(), 0), solid(sites.size(), 0);
+        for (std::size_t e = 0; e < f; ++e) {
+            const auto in = insideShape(scene.fluids[e].shape, sites, r);
+            for (std::size_t i = 0; i < sites.size(); ++i) taken[i] |= in[i];
+        }
+        for (const BoundarySpec& b : scene.boundaries)
+            if (auto* mesh = std::get_if<MeshShape>(&b.shape); mesh && mesh->check.closed()) {
+                const auto in = insideMesh(*mesh, sites, r);
+                for (std::size_t i = 0; i < sites.size(); ++i) solid[i] |= in[i];
+            }
+        std::size_t count = 0, byBoundaries = 0;
+        for (std::size_t i = 0; i < sites.size(); ++i) {
+            const Vec3 x = sites[i] + (spec.jitter > 0 ? Vec3(spec.jitter * d * jitterOffset(f, i)) : Vec3::Zero());
+            if (taken[i]) {
                 ++out.carved;
                 continue;
             }
-            if (tooCloseToWall(x)) {
-                ++out.carvedByBoundaries;
+            if (solid[i] || tooCloseToWall(x)) {
+                ++byBoundaries;
                 continue;
             }
             out.fluid.add(x, spec.velocity, mass, out.fluid.size());
@@ -231,7 +313,10 @@ Sample sampleScene(const Scene& scene) {
             restDensity.push_back(spec.material.density);
             ++count;
         }
+        out.carvedByBoundaries += byBoundaries;
         out.fluidCounts.push_back(count);
+        out.fluidSites.push_back(sites.size());
+        out.fluidCarvedByBoundaries.push_back(byBoundaries);
         progress.update(++done);
     }
     progress.finish();

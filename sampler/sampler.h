@@ -21,13 +21,16 @@ struct Sample {
     ParticleSet fluid;
     std::vector<BoundaryBody> boundaries;
     std::vector<std::size_t> fluidCounts;  ///< particles per scene fluid, in scene order
+    std::vector<std::size_t> fluidSites;   ///< lattice sites inside each fluid's shape, before carving
+    std::vector<std::size_t> fluidCarvedByBoundaries;  ///< of those, inside a solid or too close to a boundary
     std::size_t carved = 0;                ///< lattice sites dropped because an earlier fluid holds them
     std::size_t carvedByBoundaries = 0;    ///< lattice sites dropped for lying closer than 2r to a boundary
     DensityCheck density;
 };
 
-/// Samples every fluid of the scene on a lattice of spacing 2r (r = scene.particleRadius) and every boundary
-/// on a surface grid of spacing <= r. Particle masses make the interior of the lattice exactly rest density.
+/// Samples every fluid of the scene on a lattice of spacing 2r (r = scene.particleRadius), optionally jittered,
+/// and every boundary on its surface with spacing <= r. Fluid inside a closed solid or closer than 2r to any
+/// boundary is carved. Particle masses make the interior of the lattice exactly rest density.
 /// With several sources of fluid (fluids and emitters), each particle carries the scalar attribute `fluid`: its
 /// index in Scene::sourceMaterials().
 Sample sampleScene(const Scene& scene);

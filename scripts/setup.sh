@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs the Debian packages ganache needs (only those missing) and builds it into build/ (Release).
+# Installs the Debian packages ganache needs (only those missing), fetches the meshes of assets/ (scripts/assets.sh)
+# and builds ganache into build/ (Release).
 # Sourced by scripts/run.sh and scripts/test.sh; safe to run again: installed packages and the build are reused.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -23,5 +24,6 @@ if ((${#missing[@]})); then
   DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"
 fi
 
+./scripts/assets.sh
 cmake -S . -B build -DCMAKE_BUILD_TYPE=Release
 cmake --build build --parallel "$(nproc)"

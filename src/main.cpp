@@ -49,6 +49,10 @@ int main(int argc, char** argv) {
         subs.push_back(app.add_subcommand(c.name, c.help));
         addRunArgs(subs.back());
     }
+    bool check = false;
+    subs[1]->add_flag("--check", check,
+                      "print a pre-flight report of every mesh (closed or not, bad edges and faces, bounds, the "
+                      "inside/outside method) and sample nothing");
     bool explain = false;
     CLI::App* sceneCmd = app.add_subcommand("scene", "validate a scene file; --explain prints it with defaults filled in");
     addSceneArgs(sceneCmd);
@@ -64,6 +68,10 @@ int main(int argc, char** argv) {
     try {
         if (sceneCmd->parsed()) {
             sceneCommand(opt, explain);
+            return 0;
+        }
+        if (check) {
+            meshCheckCommand(opt);
             return 0;
         }
         for (std::size_t i = 0; i < commands.size(); ++i)

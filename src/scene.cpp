@@ -2,6 +2,7 @@
 
 #include "checksum.h"
 #include "emitter.h"
+#include "shapes.h"
 
 #include <fmt/format.h>
 
@@ -90,14 +91,85 @@ std::string pickShape(Section& s, const std::vector<std::string>& shapes) {
     return found;
 }
 
+// Turns an InputError "what\n  fix: how" into a SceneError at a key.
+[[noreturn]] void failWith(Section& s, const std::string& key, const InputError& e) {
+    const std::string text = e.what();
+    const auto split = text.find("\n  fix: ");
+    s.fail(key, text.substr(0, split), split == std::string::npos ? "check the file" : text.substr(split + 8));
+}
+
+// Repairs a mesh and records what it was like before; rejects meshes with nothing left to sample.
+MeshShape finishMesh(Section& s, const std::string& key, MeshShape shape, TriangleMesh mesh) {
+    shape.check = repairMesh(mesh);
+    if (mesh.empty())
+        s.fail(key, fmt::format("{}: every one of its {} triangles is degenerate (zero area)", shape.description,
+                                shape.check.triangles),
+               "repair or re-export the mesh");
+    if (shape.inside == InsideMethod::LevelSet && !shape.check.closed())
+        s.fail("inside", fmt::format("{}: `inside: level_set` needs a closed mesh, and this one has {} boundary and {} "
+                                     "non-manifold edges",
+                                     shape.description, shape.check.boundaryEdges, shape.check.nonManifoldEdges),
+               "use `inside: winding_number` (or auto), or close the mesh");
+    shape.mesh = std::make_shared<const TriangleMesh>(std::move(mesh));
+    return shape;
+}
+
+// `mesh: {file, scale | rotate | translate | fit, inside}`.
+MeshShape readMesh(Section m) {
+    MeshShape shape;
+    shape.file = m.file("file");
+    shape.description = shape.file.filename().string();
+    MeshPlacement& p = shape.placement;
+    if (m.has("fit")) {
+        for (const char* k : {"scale", "translate"})
+            if (m.has(k))
+                m.fail(k, fmt::format("{} has both `fit` and `{}`", m.path(), k),
+                       "use `fit` to size and place the mesh, or scale/translate, not both");
+        Section f = *m.child("fit");
+        MeshPlacement::Fit fit;
+        fit.size = f.positive("size", std::nullopt, "m (largest extent)");
+        if (f.has("base") == f.has("centre"))
+            f.fail("", fmt::format("{} needs exactly one of `centre` and `base`", f.path()),
+                   "e.g. `fit: {size: 0.2, base: [0, 0, 0]}` to stand the mesh on the origin");
+        fit.base = f.has("base");
+        fit.point = f.vec3(fit.base ? "base" : "centre", std::nullopt, "m");
+        f.rejectUnused();
+        p.fit = fit;
+    } else {
+        p.scale = m.isList("scale") ? m.vec3("scale", p.scale, "")
+                                    : Vec3::Constant(m.number("scale", 1, "", Bounds::positive()));
+        if ((p.scale.array() == 0).any())
+            m.fail("scale", m.path() + ".scale has a zero component", "give every axis a non-zero scale");
+        p.translation = m.vec3("translate", p.translation, "m");
+    }
+    p.rotationDegrees = m.vec3("rotate", p.rotationDegrees, "degrees about x, then y, then z");
+    const std::string inside = m.choice("inside", "auto", {"auto", "level_set", "winding_number"});
+    shape.inside = inside == "level_set"  ? InsideMethod::LevelSet
+                   : inside == "auto" ? InsideMethod::Auto
+                                      : InsideMethod::WindingNumber;
+    m.rejectUnused();
+    TriangleMesh mesh;
+    try {
+        mesh = readMeshFile(shape.file);
+    } catch (const InputError& e) {
+        failWith(m, "file", e);
+    }
+    placeMesh(mesh, p);
+    return finishMesh(m, "file", std::move(shape), std::move(mesh));
+}
+
 FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& custom) {
     FluidSpec f;
     f.at = s.where();
     f.name = s.name("name", fmt::format("fluid{}", index));
     f.material = findMaterial(s, custom);
     f.velocity = s.vec3("velocity", f.velocity, "m/s");
-    if (pickShape(s, {"box", "sphere"}) == "box") {
+    f.jitter = s.number("jitter", f.jitter, "x lattice spacing", Bounds::closed(0, 0.25));
+    const std::string shape = pickShape(s, {"box", "sphere", "mesh"});
+    if (shape == "box") {
         f.shape = readBox(*s.child("box"));
+    } else if (shape == "mesh") {
+        f.shape = readMesh(*s.child("mesh"));
     } else {
         Section sp = *s.child("sphere");
         SphereShape sh;
@@ -135,11 +207,46 @@ BodyMotion readMotion(Section m) {
     return mo;
 }
 
-BoundarySpec readBoundary(Section s, std::size_t index) {
+// A procedural solid as a mesh, its edges no longer than a particle radius.
+MeshShape proceduralSolid(Section& s, const std::string& key, Real r) {
+    Section p = *s.child(key);
+    MeshShape shape;
+    shape.description = key;
+    TriangleMesh mesh;
+    if (key == "sphere") {
+        const Vec3 c = p.vec3("centre", std::nullopt, "m");
+        mesh = sphereMesh(c, p.positive("radius", std::nullopt, "m"), r);
+    } else if (key == "cylinder") {
+        const Vec3 a = p.vec3("from", std::nullopt, "m"), b = p.vec3("to", std::nullopt, "m");
+        if ((b - a).norm() <= 0) p.fail("to", p.path() + ": `from` and `to` are the same point", "give the axis a length");
+        mesh = cylinderMesh(a, b, p.positive("radius", std::nullopt, "m"), r);
+    } else if (key == "bars") {
+        BarsGrid g;
+        g.centre = p.vec3("centre", std::nullopt, "m");
+        g.size = p.positive("size", std::nullopt, "m");
+        g.count = p.integer("count", std::nullopt, 1, 1000);
+        g.thickness = p.positive("thickness", std::nullopt, "m");
+        mesh = barsMesh(g);
+    } else {
+        DoughHook h;
+        h.top = p.vec3("top", std::nullopt, "m");
+        h.shaftLength = p.number("shaft_length", std::nullopt, "m", Bounds::nonNegative());
+        h.radius = p.positive("radius", std::nullopt, "m");
+        h.helixHeight = p.positive("helix_height", std::nullopt, "m");
+        h.turns = p.positive("turns", std::nullopt, "turns");
+        h.rodRadius = p.positive("rod_radius", std::nullopt, "m");
+        mesh = doughHookMesh(h, r);
+    }
+    p.rejectUnused();
+    return finishMesh(p, "", std::move(shape), std::move(mesh));
+}
+
+BoundarySpec readBoundary(Section s, std::size_t index, Real particleRadius) {
     BoundarySpec b;
     b.at = s.where();
     b.name = s.name("name", fmt::format("boundary{}", index));
-    if (pickShape(s, {"box", "plane"}) == "box") {
+    const std::string shape = pickShape(s, {"box", "plane", "mesh", "sphere", "cylinder", "bars", "dough_hook"});
+    if (shape == "box") {
         Section bs = *s.child("box");
         BoxBoundary box;
         box.min = bs.vec3("min", std::nullopt, "m");
@@ -148,7 +255,7 @@ BoundarySpec readBoundary(Section s, std::size_t index) {
         box.openTop = bs.boolean("open_top", box.openTop);
         bs.rejectUnused();
         b.shape = box;
-    } else {
+    } else if (shape == "plane") {
         Section ps = *s.child("plane");
         PlaneBoundary plane;
         plane.point = ps.vec3("point", plane.point, "m");
@@ -158,6 +265,10 @@ BoundarySpec readBoundary(Section s, std::size_t index) {
         plane.normal = n.normalized();
         ps.rejectUnused();
         b.shape = plane;
+    } else if (shape == "mesh") {
+        b.shape = readMesh(*s.child("mesh"));
+    } else {
+        b.shape = proceduralSolid(s, shape, particleRadius);
     }
     if (auto m = s.child("motion")) b.motion = readMotion(*m);
     s.rejectUnused();
@@ -219,6 +330,7 @@ EmitterSpec readEmitter(Section s, std::size_t index, const Scene& scene, const 
 
 std::pair<Vec3, Vec3> boundsOf(const FluidShape& shape) {
     if (auto* b = std::get_if<BoxShape>(&shape)) return {b->min, b->max};
+    if (auto* m = std::get_if<MeshShape>(&shape)) return m->mesh->bounds();
     const auto& s = std::get<SphereShape>(shape);
     return {s.centre.array() - s.radius, s.centre.array() + s.radius};
 }
@@ -280,6 +392,7 @@ Real estimateFluidParticles(const Scene& scene, Real radius) {
     Real n = 0;
     for (const auto& f : scene.fluids) {
         if (auto* b = std::get_if<BoxShape>(&f.shape)) n += (b->max - b->min).prod() / cell;
+        else if (auto* m = std::get_if<MeshShape>(&f.shape)) n += std::abs(m->check.volume) / cell;
         else n += 4.0 / 3.0 * M_PI * std::pow(std::get<SphereShape>(f.shape).radius, 3) / cell;
     }
     const Real lastFrame = scene.frames.timeOf(scene.frames.end);
@@ -362,7 +475,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
                              "enlarge domain.min/max or move the fluid inside it");
     }
     auto boundaries = root.list("boundaries");
-    for (std::size_t i = 0; i < boundaries.size(); ++i) scene.boundaries.push_back(readBoundary(boundaries[i], i));
+    for (std::size_t i = 0; i < boundaries.size(); ++i) scene.boundaries.push_back(readBoundary(boundaries[i], i, scene.particleRadius));
     for (std::size_t i = 0; i < emitters.size(); ++i)
         scene.emitters.push_back(readEmitter(emitters[i], i, scene, custom));
 

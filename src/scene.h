@@ -5,6 +5,7 @@
 #include "effect.h"
 #include "errors.h"
 #include "materials.h"
+#include "mesh.h"
 #include "scene_section.h"
 #include "types.h"
 
@@ -43,7 +44,29 @@ struct SphereShape {
     Vec3 centre;
     Real radius = 0;  ///< [m]
 };
-using FluidShape = std::variant<BoxShape, SphereShape>;
+/// How the sampler tells inside from outside for a mesh.
+enum class InsideMethod {
+    Auto,           ///< level set for closed meshes, winding numbers otherwise
+    LevelSet,       ///< OpenVDB mesh-to-level-set (needs a closed mesh)
+    WindingNumber,  ///< generalised winding numbers: holes, flipped and self-intersecting faces
+};
+
+/// A triangle mesh placed in the scene: read from a file or built by ganache (spheres, cylinders, bars, hooks),
+/// loaded, placed and repaired (orientation) when the scene is loaded.
+struct MeshShape {
+    std::filesystem::path file;  ///< empty for procedural solids
+    std::string description;     ///< the file, or the procedural shape's name
+    MeshPlacement placement;
+    InsideMethod inside = InsideMethod::Auto;
+    std::shared_ptr<const TriangleMesh> mesh;
+    MeshCheck check;             ///< facts of the mesh as read, before repair
+    /// The method `inside` resolves to for this mesh.
+    InsideMethod method() const {
+        return inside != InsideMethod::Auto ? inside : check.closed() ? InsideMethod::LevelSet
+                                                                      : InsideMethod::WindingNumber;
+    }
+};
+using FluidShape = std::variant<BoxShape, SphereShape, MeshShape>;
 
 /// A body of fluid present at t = 0.
 struct FluidSpec {
@@ -51,6 +74,7 @@ struct FluidSpec {
     Material material;
     Vec3 velocity = Vec3::Zero();  ///< initial velocity [m/s]
     FluidShape shape;
+    Real jitter = 0;               ///< random offset of each lattice site, as a fraction of the spacing
     Location at;
 };
 
@@ -65,7 +89,9 @@ struct PlaneBoundary {
     Vec3 point = Vec3::Zero();
     Vec3 normal = Vec3::UnitY();  ///< unit length
 };
-using BoundaryShape = std::variant<BoxBoundary, PlaneBoundary>;
+/// A solid from a mesh file or a procedural shape: its surface is sampled, and fluid inside it is carved when
+/// the mesh is closed.
+using BoundaryShape = std::variant<BoxBoundary, PlaneBoundary, MeshShape>;
 
 /// Prescribed motion of a boundary body: rotation about an axis through `centre` (which moves with the
 /// translation) at a constant angular velocity, plus a translation interpolated linearly between keyframes.

@@ -87,6 +87,8 @@ Location Section::where(const std::string& key) const {
 
 bool Section::has(const std::string& key) const { return m_node[key].IsDefined(); }
 
+bool Section::isList(const std::string& key) const { return m_node[key].IsSequence(); }
+
 std::string Section::keyPath(const std::string& key) const { return m_path.empty() ? key : m_path + "." + key; }
 
 void Section::fail(const std::string& key, const std::string& what, const std::string& fix) const {

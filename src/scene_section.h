@@ -49,6 +49,7 @@ public:
     Location where() const;                              ///< the map itself
     Location where(const std::string& key) const;        ///< the key's value, or the map when absent
     bool has(const std::string& key) const;
+    bool isList(const std::string& key) const;  ///< the key's value is a YAML sequence
 
     Real number(const std::string& key, std::optional<Real> fallback, const std::string& unit, Bounds bounds = {});
     Real positive(const std::string& key, std::optional<Real> fallback, const std::string& unit) {

@@ -52,14 +52,18 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
     m["initial_density_error"] = {{"max_compression", sample.density.maxCompression},
                                   {"mean_interior", sample.density.meanInterior},
                                   {"interior_particles", sample.density.interiorCount}};
-    for (std::size_t f = 0; f < scene.fluids.size(); ++f)
-        if (sample.fluidCounts[f] == 0)
-            throw SceneError(scene.fluids[f].at,
-                             fmt::format("fluid '{}' holds no particle at particle radius {} m (its lattice sites are "
-                                         "all outside it, inside an earlier fluid or too close to a boundary)",
-                                         scene.fluids[f].name, formatNumber(scene.particleRadius)),
-                             "make the fluid larger than one particle diameter, move it away from the boundaries, or "
-                             "use a finer --quality");
+    for (std::size_t f = 0; f < scene.fluids.size(); ++f) {
+        if (sample.fluidCounts[f] > 0) continue;
+        const std::string why =
+            sample.fluidSites[f] == 0 ? "no lattice site of spacing 2r lies inside it"
+            : sample.fluidCarvedByBoundaries[f] > 0 ? "it lies entirely inside a boundary or within 2r of one"
+                                                    : "an earlier fluid already holds all of it";
+        throw SceneError(scene.fluids[f].at,
+                         fmt::format("fluid '{}' holds no particle at particle radius {} m: {}", scene.fluids[f].name,
+                                     formatNumber(scene.particleRadius), why),
+                         "make the fluid larger than one particle diameter, move it out of the solids, or use a "
+                         "finer --quality");
+    }
 
     CacheInfo info{scene.name, scene.frames.start, 0.0, scene.frames.fps, scene.particleRadius};
     writeParticleCache(layout.sample(), sample.fluid, sample.boundaries, info);
@@ -181,6 +185,34 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
     fmt::print(stderr, "outputs in {} (report: {})\n", layout.root.string(), layout.report().string());
     if (stopped)
         fmt::print(stderr, "stopped after the stages this build has; the rest are listed as 'not available'\n");
+}
+
+void meshCheckCommand(const RunOptions& options) {
+    const Scene scene = loadScene(options.scene, Quality::parse(options.quality));
+    auto report = [](const std::string& role, const std::string& name, const MeshShape& m) {
+        const MeshCheck& c = m.check;
+        const auto [lo, hi] = m.mesh->bounds();
+        const char* method = m.method() == InsideMethod::LevelSet ? "level set (OpenVDB mesh to level set)"
+                                                                  : "generalised winding numbers";
+        fmt::print("{} '{}': {}\n"
+                   "  {} vertices, {} triangles in {} piece(s); {}\n"
+                   "  boundary edges {}, non-manifold edges {}, degenerate triangles {} (dropped), flipped triangles "
+                   "{} (turned back)\n"
+                   "  bounds in the scene [{:.4g}, {:.4g}, {:.4g}] to [{:.4g}, {:.4g}, {:.4g}] m, volume {:.4g} m^3\n"
+                   "  inside/outside: {}{}\n",
+                   role, name, m.description, c.vertices, c.triangles, c.components,
+                   c.closed() ? "closed" : "NOT closed", c.boundaryEdges, c.nonManifoldEdges, c.degenerateTriangles,
+                   c.flippedTriangles, lo.x(), lo.y(), lo.z(), hi.x(), hi.y(), hi.z(), c.volume, method,
+                   m.inside == InsideMethod::Auto ? " (chosen automatically)" : "");
+    };
+    std::size_t meshes = 0;
+    for (const auto& f : scene.fluids)
+        if (auto* m = std::get_if<MeshShape>(&f.shape)) report("fluid", f.name, *m), ++meshes;
+    for (const auto& b : scene.boundaries)
+        if (auto* m = std::get_if<MeshShape>(&b.shape)) report("boundary", b.name, *m), ++meshes;
+    fmt::print("{}: {} mesh(es); about {:.3g} fluid particles at {} quality (r = {} m)\n", scene.file.string(), meshes,
+               estimateFluidParticles(scene, scene.particleRadius), scene.quality.str(),
+               formatNumber(scene.particleRadius));
 }
 
 void sceneCommand(const RunOptions& options, bool explain) {

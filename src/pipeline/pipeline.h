@@ -40,6 +40,9 @@ struct OutputLayout {
 /// std::runtime_error for run-time failures. Progress and the closing table go to stderr.
 void runCommand(const RunOptions& options, const std::vector<StageId>& stages);
 
+/// `ganache sample --check`: the pre-flight facts of every mesh of the scene, to stdout.
+void meshCheckCommand(const RunOptions& options);
+
 /// `ganache scene`: validates the scene; with explain, prints the effective scene to stdout.
 void sceneCommand(const RunOptions& options, bool explain);
 
