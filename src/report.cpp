@@ -54,6 +54,7 @@ void RunReport::setSimulation(const SolverStats& s, double simulatedTime, const 
           {"viscosity_worst_residual", s.viscosityWorstResidual}}},
         {"particles_removed", s.removedParticles},
         {"particles_emitted", s.emittedParticles},
+        {"boundary_contacts", s.boundaryContacts},
         {"fluid_particles_at_end", finalFluid},
         {"warning_count", s.warningCount}};
     m_warnings.insert(m_warnings.end(), s.warnings.begin(), s.warnings.end());
@@ -104,6 +105,7 @@ nlohmann::ordered_json RunReport::toJson() const {
         j["simulation"] = {{"dt_s", m_simulation["dt_s"]},
                            {"particles_removed", m_simulation["particles_removed"]},
                            {"particles_emitted", m_simulation["particles_emitted"]},
+                           {"boundary_contacts", m_simulation["boundary_contacts"]},
                            {"fluid_particles_at_end", m_simulation["fluid_particles_at_end"]},
                            {"warning_count", m_simulation["warning_count"]}};
     j["bodies"] = m_bodies;

@@ -87,7 +87,10 @@ Location Section::where(const std::string& key) const {
 
 bool Section::has(const std::string& key) const { return m_node[key].IsDefined(); }
 
-bool Section::isList(const std::string& key) const { return m_node[key].IsSequence(); }
+bool Section::isList(const std::string& key) const {
+    const YAML::Node n = m_node[key];
+    return n.IsDefined() && n.IsSequence();
+}
 
 std::string Section::keyPath(const std::string& key) const { return m_path.empty() ? key : m_path + "." + key; }
 

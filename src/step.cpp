@@ -156,6 +156,45 @@ Real Simulation::chooseDt(Real maxDt) const {
     return std::min(dt, maxDt);
 }
 
+void Simulation::keepOffBoundaries(StepContext& ctx) {
+    // The pressure solve only pushes a particle once it is compressed, and a lone particle (a splash) is not:
+    // even touching a wall, the wall and its own mass give it less than rest density, so it would fly through.
+    // Before moving, a particle may approach a boundary only to within one particle radius of its nearest
+    // boundary particle; the rest of its approach velocity (relative to the wall, along the wall's normal) is
+    // taken out, inelastically, and given to the body. Fluid at rest sits two radii from a wall and never
+    // meets this; it never pushes, so it adds no energy.
+    const Real dt = ctx.dt, r = m_particleRadius;
+    const auto& x = m_fluid.x();
+    auto& v = m_fluid.v();
+    const auto& b = m_boundary;
+    std::vector<Vec3> change(x.size(), Vec3::Zero());
+    std::vector<std::uint32_t> nearest(x.size(), 0);
+    forEachParticle(x.size(), [&](std::size_t i) {
+        Vec3 towardWall = Vec3::Zero();
+        Real closest2 = std::numeric_limits<Real>::infinity();
+        for (std::uint32_t k : m_boundaryNeighbours.of(i)) {
+            const Vec3 xik = x[i] - b.x[k];
+            towardWall += b.volume[k] * m_kernel.gradW(xik);  // grad W points from the particle to k
+            if (xik.squaredNorm() < closest2) closest2 = xik.squaredNorm(), nearest[i] = k;
+        }
+        if (towardWall.squaredNorm() == 0) return;
+        const Vec3 n = -towardWall.normalized();  // out of the wall
+        const Real approach = -(v[i] - b.v[nearest[i]]).dot(n);
+        const Real allowed = std::max<Real>(0, std::sqrt(closest2) - r) / dt;
+        if (approach > allowed) change[i] = (approach - allowed) * n;
+    });
+    for (std::size_t i = 0; i < x.size(); ++i) {
+        if (change[i].squaredNorm() == 0) continue;
+        v[i] += change[i];
+        const Vec3 j = -m_fluid.mass()[i] * change[i];  // what the body took
+        const std::uint32_t body = b.body[nearest[i]];
+        const BodyMotion& motion = b.motion[body];
+        m_loads.impulse[body] += j;
+        m_loads.angularImpulse[body] += (b.x[nearest[i]] - (motion.centre + motion.offset(ctx.time + dt))).cross(j);
+        ++m_stats.boundaryContacts;
+    }
+}
+
 void Simulation::removeEscaped() {
     const auto& x = m_fluid.x();
     std::vector<std::uint8_t> out(x.size());
@@ -229,6 +268,7 @@ void Simulation::step(Real maxDt) {
     }
     {
         ScopedTimer t(m_stats.time.advect);
+        if (!m_boundary.x.empty()) keepOffBoundaries(ctx);
         auto& x = m_fluid.x();
         const auto& v = m_fluid.v();
         forEachParticle(x.size(), [&](std::size_t i) { x[i] += dt * v[i]; }, 4096);

@@ -67,6 +67,7 @@ struct SolverStats {
     Real viscosityWorstResidual = 0;  ///< largest relative residual a viscosity solve ended with
     std::size_t removedParticles = 0;  ///< left the domain
     std::size_t emittedParticles = 0;  ///< added by emitters
+    std::size_t boundaryContacts = 0;  ///< approaches to a boundary stopped at one particle radius
     Real dtMin = std::numeric_limits<Real>::infinity(), dtMax = 0;
     StageTimes time;
     std::vector<std::string> warnings;  ///< the first kMaxWarnings, then only counted
@@ -123,6 +124,7 @@ private:
     void computeDensities();
     Real chooseDt(Real maxDt) const;
     void removeEscaped();
+    void keepOffBoundaries(StepContext& ctx);
     void moveBoundaries(Real t);
     void checkFinite(const char* stage);
 
