@@ -72,8 +72,8 @@ TriangleMesh readMeshFile(const std::filesystem::path& file) {
         file.string(), aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
                            aiProcess_SortByPType);
     if (!scene)
-        throw InputError(fmt::format("{}: cannot read the mesh: {}\n  fix: give an OBJ, PLY, STL, OFF or glTF file "
-                                     "(or another format assimp reads)",
+        throw InputError(fmt::format("{}: cannot read a triangle mesh from it: {}\n  fix: give an OBJ, PLY, STL, OFF "
+                                     "or glTF file (or another format assimp reads) whose objects have faces",
                                      file.string(), importer.GetErrorString()));
     TriangleMesh mesh;
     for (unsigned m = 0; m < scene->mNumMeshes; ++m) {

@@ -108,6 +108,27 @@ TEST(Cli, AnEmitterOnlySceneStartsEmptyAndFills) {
     EXPECT_GT(report["per_step_ms"]["emit"].get<double>(), 0.0);
 }
 
+TEST(Cli, FluidInsideASolidAndMeshChecks) {
+    const fs::path dir = freshDir("inside_solid");
+    const std::string cube = (kSource / "tests/meshes/cube.obj").string();
+    std::ofstream(dir / "buried.yaml") << "ganache: 1\nparticles: {radius: 0.02}\n"
+                                          "domain: {min: [-1, -1, -1], max: [2, 2, 2]}\n"
+                                          "fluids: [{name: buried, box: {min: [0.3, 0.3, 0.3], max: [0.7, 0.7, 0.7]}}]\n"
+                                          "boundaries: [{name: rock, mesh: {file: " << cube << "}}]\n";
+    Result r = runGanache("sample " + (dir / "buried.yaml").string() + " --quality final --out " + (dir / "out").string());
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find("buried.yaml:4:10: fluid 'buried' holds no particle"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("inside a boundary"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir / "out/sample/buried.vdb"));
+
+    r = runGanache("sample " + (dir / "buried.yaml").string() + " --check");
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("boundary 'rock': cube.obj"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("closed"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("level set"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir / "out")) << "--check samples nothing";
+}
+
 TEST(Cli, SimulateNeedsTheSample) {
     const fs::path out = freshDir("simulate_alone");
     const Result r = runGanache("simulate " + kTiny + " --out " + out.string());
