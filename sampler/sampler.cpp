@@ -33,7 +33,7 @@ std::vector<std::uint8_t> insideShape(const FluidShape& shape, const std::vector
 // Lattice sites of spacing d inside the shape. A box holds round(extent / d) sites per axis, centred in it,
 // so that the sampled volume n d^3 matches the box; a sphere's lattice is centred on its centre, a mesh's on
 // its bounding box.
-std::vector<Vec3> latticeSites(const FluidShape& shape, Real d) {
+std::vector<Vec3> latticeSites(const FluidShape& shape, Real d, const SampleCache* cache, Sample& out) {
     std::vector<Vec3> sites;
     if (auto* b = std::get_if<BoxShape>(&shape)) {
         Eigen::Vector3i n;
@@ -45,8 +45,15 @@ std::vector<Vec3> latticeSites(const FluidShape& shape, Real d) {
                 for (int i = 0; i < n.x(); ++i) sites.push_back(first + d * Vec3(i, j, k));
         return sites;
     }
+    const auto* mesh = std::get_if<MeshShape>(&shape);
+    const std::uint64_t key = mesh ? sampleKey(*mesh->mesh, "fluid sites", d, int(mesh->method())) : 0;
+    if (mesh && cache)
+        if (auto hit = cache->load(key)) {
+            ++out.cacheHits;
+            return *hit;
+        }
     Vec3 centre, halfExtent;
-    if (auto* m = std::get_if<MeshShape>(&shape)) {
+    if (auto* m = mesh) {
         const auto [lo, hi] = m->mesh->bounds();
         centre = 0.5 * (lo + hi);
         halfExtent = 0.5 * (hi - lo);
@@ -63,6 +70,10 @@ std::vector<Vec3> latticeSites(const FluidShape& shape, Real d) {
     std::vector<Vec3> kept;
     for (std::size_t i = 0; i < sites.size(); ++i)
         if (in[i]) kept.push_back(sites[i]);
+    if (mesh && cache) {
+        cache->store(key, kept);
+        ++out.cacheMisses;
+    }
     return kept;
 }
 
@@ -238,7 +249,7 @@ DensityCheck checkDensity(const ParticleSet& fluid, const std::vector<Real>& res
     return out;
 }
 
-Sample sampleScene(const Scene& scene) {
+Sample sampleScene(const Scene& scene, const SampleCache* cache) {
     Sample out;
     const Real r = scene.particleRadius;
     const Real d = 2 * r;
@@ -253,7 +264,13 @@ Sample sampleScene(const Scene& scene) {
         BoundaryBody body;
         body.name = spec.name;
         if (auto* box = std::get_if<BoxBoundary>(&spec.shape)) body.x = sampleBoxWalls(*box, r);
-        else if (auto* mesh = std::get_if<MeshShape>(&spec.shape)) body.x = sampleSurface(*mesh->mesh, r);
+        else if (auto* mesh = std::get_if<MeshShape>(&spec.shape)) {
+            const std::uint64_t key = sampleKey(*mesh->mesh, "surface", r, 0);
+            auto hit = cache ? cache->load(key) : std::nullopt;
+            if (hit) ++out.cacheHits;
+            body.x = hit ? std::move(*hit) : sampleSurface(*mesh->mesh, r);
+            if (cache && !hit) cache->store(key, body.x), ++out.cacheMisses;
+        }
         else body.x = samplePlane(std::get<PlaneBoundary>(spec.shape), scene.domainMin, scene.domainMax, r, h);
         body.volume = boundaryVolumes(body.x, w);
         allBoundary.insert(allBoundary.end(), body.x.begin(), body.x.end());
@@ -285,7 +302,7 @@ Sample sampleScene(const Scene& scene) {
     for (std::size_t f = 0; f < scene.fluids.size(); ++f) {
         const FluidSpec& spec = scene.fluids[f];
         const Real mass = latticeMass(d, spec.material.density, w);
-        const std::vector<Vec3> sites = latticeSites(spec.shape, d);
+        const std::vector<Vec3> sites = latticeSites(spec.shape, d, cache, out);
         // Sites an earlier fluid holds, or that lie inside a closed solid, are carved.
         std::vector<std::uint8_t> taken(sites.size(), 0), solid(sites.size(), 0);
         for (std::size_t e = 0; e < f; ++e) {

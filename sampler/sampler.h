@@ -3,6 +3,7 @@
 
 #include "kernels.h"
 #include "particles.h"
+#include "sample_cache.h"
 #include "scene.h"
 
 #include <string>
@@ -26,6 +27,7 @@ struct Sample {
     std::size_t carved = 0;                ///< lattice sites dropped because an earlier fluid holds them
     std::size_t carvedByBoundaries = 0;    ///< lattice sites dropped for lying closer than 2r to a boundary
     DensityCheck density;
+    std::size_t cacheHits = 0, cacheMisses = 0;  ///< mesh inputs read from / written to the cache
 };
 
 /// Samples every fluid of the scene on a lattice of spacing 2r (r = scene.particleRadius), optionally jittered,
@@ -33,7 +35,9 @@ struct Sample {
 /// boundary is carved. Particle masses make the interior of the lattice exactly rest density.
 /// With several sources of fluid (fluids and emitters), each particle carries the scalar attribute `fluid`: its
 /// index in Scene::sourceMaterials().
-Sample sampleScene(const Scene& scene);
+/// With a cache, the sampled points of every mesh input are read from it when their key matches, and stored
+/// otherwise.
+Sample sampleScene(const Scene& scene, const SampleCache* cache = nullptr);
 
 /// Boundary volumes V_k = gamma / sum_l W(x_k - x_l) over one body's particles (Akinci et al. 2012, Eq. 4),
 /// with gamma = flatWallCalibration(w).

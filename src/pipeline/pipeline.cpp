@@ -40,7 +40,8 @@ const char* missingStageNote(StageId s) {
 void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report) {
     StageRecord& stage = report.addStage("sample");
     Stopwatch clock;
-    const Sample sample = sampleScene(scene);
+    const SampleCache cache(layout.sampleCache());
+    const Sample sample = sampleScene(scene, &cache);
     std::size_t boundaryCount = 0;
     for (const auto& b : sample.boundaries) boundaryCount += b.x.size();
     report.setCounts(sample.fluid.size(), boundaryCount);
@@ -69,8 +70,13 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
     writeParticleCache(layout.sample(), sample.fluid, sample.boundaries, info);
     stage.seconds = clock.seconds();
     stage.outputs.push_back(layout.sample().string());
-    stage.note = fmt::format("{} fluid + {} boundary particles; initial max compression {:.2g} %",
-                             sample.fluid.size(), boundaryCount, 100 * sample.density.maxCompression);
+    stage.note = fmt::format("{} fluid + {} boundary particles; initial max compression {:.2g} %{}", sample.fluid.size(),
+                             boundaryCount, 100 * sample.density.maxCompression,
+                             sample.cacheHits + sample.cacheMisses
+                                 ? fmt::format("; meshes: {} from the cache, {} sampled", sample.cacheHits,
+                                               sample.cacheMisses)
+                                 : std::string());
+    m["mesh_cache"] = {{"hits", sample.cacheHits}, {"misses", sample.cacheMisses}};
 }
 
 // Frames carry the boundary particles of the bodies that move (static ones are in the sample).

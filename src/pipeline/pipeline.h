@@ -27,11 +27,13 @@ struct RunOptions {
 /// The inclusive frame range "A-B" (or "A") within the scene's frames; InputError when malformed or outside.
 std::pair<std::int64_t, std::int64_t> parseFrameRange(const std::string& text, const FrameRange& scene);
 
-/// Output locations of a scene: <out>/sample/<name>.vdb, <out>/particles/<name>.NNNN.vdb, <out>/report.json.
+/// Output locations of a scene: <out>/sample/<name>.vdb, <out>/particles/<name>.NNNN.vdb, <out>/report.json,
+/// <out>/cache/ (the sampler's mesh cache).
 struct OutputLayout {
     std::filesystem::path root;
     std::string name;
     std::filesystem::path sample() const { return root / "sample" / (name + ".vdb"); }
+    std::filesystem::path sampleCache() const { return root / "cache"; }  ///< sampled mesh inputs, by key
     std::filesystem::path particles(std::int64_t frame) const;
     std::filesystem::path report() const { return root / "report.json"; }
 };

@@ -221,6 +221,40 @@ boundaries: [{{name: block, mesh: {{file: {}}}}}]
     EXPECT_GT(out.fluid.size(), 0u);
 }
 
+TEST(MeshSampler, CachedInputsGiveTheSameSampleAndCorruptOnesAreRedone) {
+    const fs::path sphere = writeObj("cached_sphere", sphereMesh(Vec3::Zero(), 0.1, 0.01));
+    const fs::path folder = tempDir() / "cache";
+    fs::remove_all(folder);
+    auto scene = [&](const std::string& radius) {
+        return sceneFrom("cached", fmt::format(R"(particles: {{radius: {}}}
+domain: {{min: [-1, -1, -1], max: [1, 1, 1]}}
+fluids: [{{mesh: {{file: {}}}}}]
+boundaries: [{{name: post, cylinder: {{from: [0.3, 0, 0], to: [0.3, 0.2, 0], radius: 0.05}}}}]
+)",
+                                               radius, sphere.string()));
+    };
+    const SampleCache cache(folder);
+    const Sample first = sampleScene(scene("0.01"), &cache);
+    EXPECT_EQ(first.cacheHits, 0u);
+    EXPECT_EQ(first.cacheMisses, 2u);  // the fluid's sites and the post's surface
+    const Sample again = sampleScene(scene("0.01"), &cache);
+    EXPECT_EQ(again.cacheHits, 2u);
+    EXPECT_EQ(again.fluid.x(), first.fluid.x());
+    EXPECT_EQ(again.boundaries[0].x, first.boundaries[0].x);
+    // Another radius is another key.
+    EXPECT_EQ(sampleScene(scene("0.012"), &cache).cacheHits, 0u);
+    // A damaged file is a miss, sampled again and rewritten.
+    for (const auto& e : fs::directory_iterator(folder)) {
+        std::fstream f(e.path(), std::ios::in | std::ios::out | std::ios::binary);
+        f.seekp(30);
+        f.put('\x5a');
+    }
+    const Sample repaired = sampleScene(scene("0.01"), &cache);
+    EXPECT_EQ(repaired.cacheHits, 0u);
+    EXPECT_EQ(repaired.fluid.x(), first.fluid.x());
+    EXPECT_EQ(sampleScene(scene("0.01"), &cache).cacheHits, 2u);
+}
+
 TEST(MeshSampler, FluidInAClosedBoxNeverLeavesItOverASecond) {
     // Water thrown against the walls of a closed box for a simulated second: every particle stays inside.
     const Scene s = sceneFrom("sloshing", R"(particles: {radius: 0.01}
