@@ -161,7 +161,8 @@ void Simulation::keepOffBoundaries(StepContext& ctx) {
     // even touching a wall, the wall and its own mass give it less than rest density, so it would fly through.
     // Before moving, a particle may approach a boundary only to within one particle radius of its nearest
     // boundary particle; the rest of its approach velocity (relative to the wall, along the wall's normal) is
-    // taken out, inelastically, and given to the body. Fluid at rest sits two radii from a wall and never
+    // taken out, inelastically, and given to the body (all of it, for simplicity, to the body of the nearest
+    // boundary particle). Fluid at rest sits two radii from a wall and never
     // meets this; it never pushes, so it adds no energy.
     const Real dt = ctx.dt, r = m_particleRadius;
     const auto& x = m_fluid.x();
@@ -179,9 +180,24 @@ void Simulation::keepOffBoundaries(StepContext& ctx) {
         }
         if (towardWall.squaredNorm() == 0) return;
         const Vec3 n = -towardWall.normalized();  // out of the wall
-        const Real approach = -(v[i] - b.v[nearest[i]]).dot(n);
+        Vec3 vi = v[i];
+        const Real approach = -(vi - b.v[nearest[i]]).dot(n);
         const Real allowed = std::max<Real>(0, std::sqrt(closest2) - r) / dt;
-        if (approach > allowed) change[i] = (approach - allowed) * n;
+        if (approach > allowed) vi += (approach - allowed) * n;
+        // Where walls meet, one normal cannot hold both: no particle may also come nearer than 3/4 r to any single
+        // boundary particle. Boundary particles are at most r apart, so every gap between them is narrower
+        // (r / sqrt 2 from its centre to its corners): nothing slips through. Fluid sliding along a wall keeps
+        // at least r from it and does not meet this.
+        for (std::uint32_t k : m_boundaryNeighbours.of(i)) {
+            const Vec3 xik = x[i] - b.x[k];
+            const Real dist = xik.norm();
+            if (dist == 0 || dist > r + dt * (vi - b.v[k]).norm()) continue;
+            const Vec3 nk = xik / dist;
+            const Real closing = -(vi - b.v[k]).dot(nk);
+            const Real limit = std::max<Real>(0, dist - 0.75 * r) / dt;
+            if (closing > limit) vi += (closing - limit) * nk;
+        }
+        change[i] = vi - v[i];
     });
     for (std::size_t i = 0; i < x.size(); ++i) {
         if (change[i].squaredNorm() == 0) continue;

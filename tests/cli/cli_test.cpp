@@ -121,12 +121,12 @@ TEST(Cli, FluidInsideASolidAndMeshChecks) {
     EXPECT_NE(r.output.find("inside a boundary"), std::string::npos) << r.output;
     EXPECT_FALSE(fs::exists(dir / "out/sample/buried.vdb"));
 
-    r = runGanache("sample " + (dir / "buried.yaml").string() + " --check");
+    r = runGanache("sample " + (dir / "buried.yaml").string() + " --check --out " + (dir / "check").string());
     EXPECT_EQ(r.code, 0) << r.output;
     EXPECT_NE(r.output.find("boundary 'rock': cube.obj"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("closed"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("level set"), std::string::npos) << r.output;
-    EXPECT_FALSE(fs::exists(dir / "out")) << "--check samples nothing";
+    EXPECT_FALSE(fs::exists(dir / "check")) << "--check samples and writes nothing";
 }
 
 TEST(Cli, SimulateNeedsTheSample) {
