@@ -144,6 +144,93 @@ TEST(MeshSampler, WindingNumberIsOneInsideAndZeroOutside) {
     EXPECT_NEAR(ws.at(Vec3(1.1, 0, 0)), 0.0, 0.05);
 }
 
+TEST(MeshSampler, ReadsObjPlyStlOffAndGltf) {
+    // The unit cube in each format an artist is likely to hand over; each must load as a closed mesh of volume 1.
+    const TriangleMesh cube = boxMesh(Vec3::Zero(), Vec3::Ones());
+    const fs::path dir = tempDir();
+    writeObj("cube_obj", cube);
+    {
+        std::ofstream ply(dir / "cube_ply.ply");
+        ply << "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n"
+               "element face 12\nproperty list uchar int vertex_indices\nend_header\n";
+        for (const Vec3& v : cube.vertices) ply << v.x() << " " << v.y() << " " << v.z() << "\n";
+        for (const auto& t : cube.triangles) ply << "3 " << t[0] << " " << t[1] << " " << t[2] << "\n";
+        std::ofstream off(dir / "cube_off.off");
+        off << "OFF\n8 12 0\n";
+        for (const Vec3& v : cube.vertices) off << v.x() << " " << v.y() << " " << v.z() << "\n";
+        for (const auto& t : cube.triangles) off << "3 " << t[0] << " " << t[1] << " " << t[2] << "\n";
+        std::ofstream stl(dir / "cube_stl.stl");
+        stl << "solid cube\n";
+        for (const auto& t : cube.triangles) {
+            stl << " facet normal 0 0 0\n  outer loop\n";
+            for (std::uint32_t v : t)
+                stl << "   vertex " << cube.vertices[v].x() << " " << cube.vertices[v].y() << " " << cube.vertices[v].z() << "\n";
+            stl << "  endloop\n endfacet\n";
+        }
+        stl << "endsolid cube\n";
+    }
+    {
+        // glTF 2.0 with its buffer embedded as base64: 8 float positions, then 36 unsigned-short indices.
+        std::string bytes;
+        for (const Vec3& v : cube.vertices)
+            for (int a = 0; a < 3; ++a) {
+                const float f = float(v[a]);
+                bytes.append(reinterpret_cast<const char*>(&f), 4);
+            }
+        for (const auto& t : cube.triangles)
+            for (std::uint32_t v : t) {
+                const std::uint16_t i = std::uint16_t(v);
+                bytes.append(reinterpret_cast<const char*>(&i), 2);
+            }
+        static const char* b64 = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+        std::string encoded;
+        for (std::size_t i = 0; i < bytes.size(); i += 3) {
+            std::uint32_t n = std::uint32_t(std::uint8_t(bytes[i])) << 16;
+            if (i + 1 < bytes.size()) n |= std::uint32_t(std::uint8_t(bytes[i + 1])) << 8;
+            if (i + 2 < bytes.size()) n |= std::uint8_t(bytes[i + 2]);
+            encoded += b64[(n >> 18) & 63];
+            encoded += b64[(n >> 12) & 63];
+            encoded += i + 1 < bytes.size() ? b64[(n >> 6) & 63] : '=';
+            encoded += i + 2 < bytes.size() ? b64[n & 63] : '=';
+        }
+        std::ofstream(dir / "cube_gltf.gltf") << fmt::format(
+            R"({{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}], "nodes": [{{"mesh": 0}}],
+"meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1}}]}}],
+"buffers": [{{"byteLength": {0}, "uri": "data:application/octet-stream;base64,{1}"}}],
+"bufferViews": [{{"buffer": 0, "byteOffset": 0, "byteLength": 96}}, {{"buffer": 0, "byteOffset": 96, "byteLength": 72}}],
+"accessors": [{{"bufferView": 0, "componentType": 5126, "count": 8, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1]}},
+              {{"bufferView": 1, "componentType": 5123, "count": 36, "type": "SCALAR"}}]}})",
+            bytes.size(), encoded);
+    }
+    for (const char* name : {"cube_obj.obj", "cube_ply.ply", "cube_stl.stl", "cube_off.off", "cube_gltf.gltf"}) {
+        SCOPED_TRACE(name);
+        TriangleMesh m = readMeshFile(dir / name);
+        const MeshCheck c = repairMesh(m);
+        EXPECT_TRUE(c.closed()) << c.boundaryEdges << " boundary edges";
+        EXPECT_NEAR(c.volume, 1.0, 1e-6);
+        EXPECT_EQ(c.triangles, 12u);
+    }
+}
+
+TEST(MeshSampler, JitterMovesParticlesRepeatablyWithinItsBound) {
+    auto sample = [](const std::string& jitter) {
+        return sampleScene(sceneFrom(jitter == "0" ? "jitter_off" : "jitter_on", R"(particles: {radius: 0.01}
+domain: {min: [-1, -1, -1], max: [1, 1, 1]}
+fluids: [{jitter: )" + jitter + R"(, box: {min: [0, 0, 0], max: [0.2, 0.2, 0.2]}}]
+)"));
+    };
+    const Sample plain = sample("0"), a = sample("0.2"), b = sample("0.2");
+    ASSERT_EQ(plain.fluid.size(), a.fluid.size());
+    EXPECT_EQ(a.fluid.x(), b.fluid.x()) << "the same scene samples the same particles";
+    Real largest = 0;
+    for (std::size_t i = 0; i < a.fluid.size(); ++i)
+        largest = std::max(largest, (a.fluid.x()[i] - plain.fluid.x()[i]).cwiseAbs().maxCoeff());
+    EXPECT_LE(largest, 0.2 * 0.02 + 1e-12);
+    EXPECT_GT(largest, 0.1 * 0.02);
+    // A jittered start is compressed somewhere, and the sample says by how much.
+    EXPECT_GT(a.density.maxCompression, plain.density.maxCompression);
+}
+
 TEST(MeshSampler, PlacementIsAppliedAsDocumented) {
     TriangleMesh m = boxMesh(Vec3::Zero(), Vec3(1, 2, 3));
     MeshPlacement p;
@@ -202,9 +289,10 @@ boundaries:
         for (const Vec3& x : ball) nearest = std::min(nearest, (x - 0.1 * dir).norm());
         EXPECT_LE(nearest, 0.005) << dir.transpose();
     }
-    // The bars' volume: 5 bars each way of 0.4 x 0.02 x 0.02, their 25 crossings counted once.
-    EXPECT_NEAR(std::abs(s.boundaries[2].shape.index() == 2 ? std::get<MeshShape>(s.boundaries[2].shape).check.volume : 0),
-                10 * 0.4 * 0.02 * 0.02, 1e-9);  // the mesh volume counts crossings twice (overlapping boxes)
+    // The bars are ten overlapping boxes of 0.4 x 0.02 x 0.02; a mesh's signed volume adds its pieces, so the
+    // crossings count twice.
+    EXPECT_NEAR(std::get<MeshShape>(s.boundaries[2].shape).check.volume, 10 * 0.4 * 0.02 * 0.02, 1e-9);
+    EXPECT_EQ(std::get<MeshShape>(s.boundaries[2].shape).check.components, 10u);
 }
 
 TEST(MeshSampler, FluidInsideAClosedSolidIsCarved) {
