@@ -295,7 +295,9 @@ std::filesystem::path Section::file(const std::string& key) {
     if (!std::filesystem::is_regular_file(p, ec))
         fail(key, fmt::format("{}: file '{}' does not exist (looked for {})", keyPath(key), n.Scalar(), p.string()),
              "check the spelling; relative paths start at the folder of the scene file");
-    record(key, n.Scalar(), "");
+    // The effective scene names the file absolutely, so its printout loads from anywhere.
+    p = std::filesystem::absolute(p).lexically_normal();
+    record(key, p.string(), "");
     return p;
 }
 

@@ -64,7 +64,7 @@ public:
     /// One of `choices`; anything else is an error with a "did you mean".
     std::string choice(const std::string& key, std::optional<std::string> fallback,
                        const std::vector<std::string>& choices);
-    /// A path, resolved relative to the scene file; it must exist.
+    /// A path, resolved relative to the scene file; it must exist. Recorded (and returned) as an absolute path.
     std::filesystem::path file(const std::string& key);
 
     /// A nested map, or nothing when the key is absent. A key with no value (`gravity:`) is an empty map.
