@@ -1,5 +1,6 @@
 #include "effect.h"
 
+#include "heat.h"
 #include "parallel.h"
 #include "step.h"
 #include "viscosity_weiler2018.h"
@@ -57,12 +58,14 @@ const std::vector<EffectEntry>& effectTable() {
         {"gravity", Stage::Forces, "uniform acceleration of every fluid particle", &readGravity, &makeGravity},
         {"viscosity", Stage::Viscosity, "implicit viscosity of Weiler et al. 2018", &readViscosity,
          &makeViscosityWeiler2018},
+        {"heat", Stage::Heat, "temperature: conduction, radiation, heat sources; melting through viscosity laws",
+         &readHeat, &makeHeat},
     };
     return table;
 }
 
 std::vector<std::vector<std::unique_ptr<Effect>>> makeEffects(const Scene& scene, ParticleSet& particles) {
-    std::vector<std::vector<std::unique_ptr<Effect>>> byStage(3);
+    std::vector<std::vector<std::unique_ptr<Effect>>> byStage(4);
     for (const auto& spec : scene.effects)
         for (const auto& e : effectTable())
             if (e.name == spec.name) byStage[std::size_t(e.stage)].push_back(e.make(*spec.params, scene, particles));

@@ -14,11 +14,15 @@
 namespace ganache {
 
 /// Slots of one time step that effects fill, in this order (Algorithm 1 of Weiler et al. 2018).
-enum class Stage { Forces, Viscosity, EndOfStep };
+enum class Stage { Heat, Forces, Viscosity, EndOfStep };
 
 /// Base of each effect's parameters, read from its section of the scene.
+struct Scene;
+
 struct EffectParams {
     virtual ~EffectParams() = default;
+    /// Checks what needs the whole scene (e.g. that a named body exists); throws SceneError at `at`.
+    virtual void check(const Scene& /*scene*/, const Location& /*at*/) const {}
 };
 
 /// Uniform gravitational acceleration [m/s^2].

@@ -98,6 +98,7 @@ void Emitters::emitLayer(Nozzle& n, std::size_t index, Real t, Real age, Particl
         if ((x - layerCentre).norm() <= reach + 2 * blockDistance) nearby.push_back(x);
 
     std::vector<Real>* source = particles.findScalar("fluid");
+    std::vector<Real>* temperature = particles.findScalar("temperature");
     std::size_t blocked = 0;
     for (const Vec3& site : n.sites) {
         // Each particle leaves at the nozzle's speed plus the velocity of its point of the (moving) nozzle, and
@@ -113,6 +114,7 @@ void Emitters::emitLayer(Nozzle& n, std::size_t index, Real t, Real age, Particl
         }
         particles.add(x, velocity, n.mass, nextId++);
         if (source) source->back() = Real(n.sourceIndex);
+        if (temperature) temperature->back() = n.spec.temperature;
     }
     EmitterReport& report = m_reports[index];
     report.emitted += n.sites.size() - blocked;

@@ -34,7 +34,8 @@ public:
     Emitters(const Scene& scene, Real particleRadius);
 
     /// Adds the layers that left the nozzles between t0 and t0 + dt, at their positions at t0 + dt. New particles
-    /// get ids from nextId onwards, the `fluid` attribute when the set has one, and zero in every other attribute.
+    /// get ids from nextId onwards, the `fluid` attribute and their emitter's temperature when the set has those
+    /// attributes, and zero in every other attribute.
     void emit(Real t0, Real dt, ParticleSet& particles, std::uint64_t& nextId, SolverStats& stats);
 
     const std::vector<EmitterReport>& reports() const { return m_reports; }

@@ -28,6 +28,54 @@ std::vector<std::string> presetNames() {
     return names;
 }
 
+// Exactly one of the shape keys must be present.
+std::string pickShape(Section& s, const std::vector<std::string>& shapes) {
+    std::string found;
+    for (const auto& k : shapes)
+        if (s.has(k)) {
+            if (!found.empty())
+                s.fail(k, fmt::format("{} has both '{}' and '{}'", s.path(), found, k), "give exactly one shape");
+            found = k;
+        }
+    if (found.empty())
+        s.fail("", fmt::format("{} has no shape", s.path()),
+               fmt::format("add one of: {}", joinNames(shapes)) + ", e.g. `box: {min: [0, 0, 0], max: [1, 1, 1]}`");
+    return found;
+}
+
+// `viscosity_law: {reynolds: {...}}` or `{ramp: [{temperature, mu}, ...]}`.
+ViscosityLaw readViscosityLaw(Section s) {
+    ViscosityLaw law;
+    if (pickShape(s, {"reynolds", "ramp"}) == "reynolds") {
+        Section r = *s.child("reynolds");
+        law.mu0 = r.positive("mu0", std::nullopt, "Pa s");
+        law.t0 = r.number("t0", law.t0, "C");
+        law.alpha = r.number("alpha", std::nullopt, "1/K");
+        law.muMin = r.positive("min", law.mu0 * 1e-6, "Pa s");
+        law.muMax = r.positive("max", law.mu0 * 1e6, "Pa s");
+        if (law.muMax < law.muMin)
+            r.fail("max", fmt::format("{}.max ({} Pa s) is below min ({} Pa s)", r.path(), formatNumber(law.muMax),
+                                      formatNumber(law.muMin)),
+                   "make max at least min");
+        r.rejectUnused();
+    } else {
+        law.kind = ViscosityLaw::Kind::Ramp;
+        for (Section& p : s.list("ramp")) {
+            const Real t = p.number("temperature", std::nullopt, "C");
+            if (!law.ramp.empty() && !(t > law.ramp.back().first))
+                p.fail("temperature", fmt::format("{}.temperature ({} C) must be above the previous point's ({} C)",
+                                                  p.path(), formatNumber(t), formatNumber(law.ramp.back().first)),
+                       "list the ramp in increasing temperature");
+            law.ramp.emplace_back(t, p.positive("mu", std::nullopt, "Pa s"));
+            p.rejectUnused();
+        }
+        if (law.ramp.empty())
+            s.fail("ramp", s.path() + ".ramp has no points", "give at least one `{temperature: C, mu: Pa s}`");
+    }
+    s.rejectUnused();
+    return law;
+}
+
 // `materials:` maps a user's name to a preset it starts from and the values it changes.
 std::vector<Material> readMaterials(std::optional<Section> section) {
     std::vector<Material> out;
@@ -42,6 +90,9 @@ std::vector<Material> readMaterials(std::optional<Section> section) {
         mat.name = key;
         mat.density = m.positive("density", mat.density, "kg/m^3");
         mat.mu = m.number("mu", mat.mu, "Pa s", Bounds::nonNegative());
+        mat.conductivity = m.number("conductivity", mat.conductivity, "W/(m K)", Bounds::nonNegative());
+        mat.heatCapacity = m.positive("heat_capacity", mat.heatCapacity, "J/(kg K)");
+        if (auto law = m.child("viscosity_law")) mat.law = readViscosityLaw(*law);
         mat.source = "user material based on " + base;
         m.rejectUnused();
         out.push_back(mat);
@@ -76,20 +127,6 @@ BoxShape readBox(Section s) {
     return b;
 }
 
-// Exactly one of the shape keys must be present.
-std::string pickShape(Section& s, const std::vector<std::string>& shapes) {
-    std::string found;
-    for (const auto& k : shapes)
-        if (s.has(k)) {
-            if (!found.empty())
-                s.fail(k, fmt::format("{} has both '{}' and '{}'", s.path(), found, k), "give exactly one shape");
-            found = k;
-        }
-    if (found.empty())
-        s.fail("", fmt::format("{} has no shape", s.path()),
-               fmt::format("add one of: {}", joinNames(shapes)) + ", e.g. `box: {min: [0, 0, 0], max: [1, 1, 1]}`");
-    return found;
-}
 
 // Turns an InputError "what\n  fix: how" into a SceneError at a key.
 [[noreturn]] void failWith(Section& s, const std::string& key, const InputError& e) {
@@ -165,6 +202,7 @@ FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& c
     f.material = findMaterial(s, custom);
     f.velocity = s.vec3("velocity", f.velocity, "m/s");
     f.jitter = s.number("jitter", f.jitter, "x lattice spacing", Bounds::closed(0, 0.25));
+    f.temperature = s.number("temperature", f.temperature, "C (used with the heat effect)", Bounds{-273.15, 1e4});
     const std::string shape = pickShape(s, {"box", "sphere", "mesh"});
     if (shape == "box") {
         f.shape = readBox(*s.child("box"));
@@ -182,7 +220,8 @@ FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& c
     return f;
 }
 
-// `motion:` of a boundary body or an emitter: rotation about an axis and keyframed translation.
+}  // namespace
+
 BodyMotion readMotion(Section m) {
     BodyMotion mo;
     if (auto rot = m.child("rotation")) {
@@ -206,6 +245,8 @@ BodyMotion readMotion(Section m) {
     m.rejectUnused();
     return mo;
 }
+
+namespace {
 
 // A procedural solid as a mesh, its edges no longer than a particle radius.
 MeshShape proceduralSolid(Section& s, const std::string& key, Real r) {
@@ -298,6 +339,7 @@ EmitterSpec readEmitter(Section s, std::size_t index, const Scene& scene, const 
         s.fail("direction", s.path() + ".direction must not be the zero vector", "e.g. `direction: [0, -1, 0]`");
     e.direction = dir.normalized();
     e.speed = s.positive("speed", std::nullopt, "m/s");
+    e.temperature = s.number("temperature", e.temperature, "C (used with the heat effect)", Bounds{-273.15, 1e4});
     e.start = s.number("start", e.start, "s", Bounds::nonNegative());
     e.end = s.number("end", scene.frames.timeOf(scene.frames.end), "s (default: the last frame)", Bounds::nonNegative());
     if (!(e.end > e.start))
@@ -378,6 +420,13 @@ const EffectSpec* Scene::findEffect(const std::string& effectName) const {
     for (const auto& e : effects)
         if (e.name == effectName) return &e;
     return nullptr;
+}
+
+std::vector<Real> Scene::sourceTemperatures() const {
+    std::vector<Real> out;
+    for (const auto& f : fluids) out.push_back(f.temperature);
+    for (const auto& e : emitters) out.push_back(e.temperature);
+    return out;
 }
 
 std::vector<Material> Scene::sourceMaterials() const {
@@ -506,6 +555,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     }
     if (auto eff = root.child("effects")) scene.effects = readEffects(*eff);
     root.rejectUnused();
+    for (const auto& e : scene.effects) e.params->check(scene, e.at);
 
     const Real estimate = estimateFluidParticles(scene, scene.particleRadius);
     if (estimate > Real(scene.maxParticles)) {

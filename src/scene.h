@@ -75,6 +75,7 @@ struct FluidSpec {
     Vec3 velocity = Vec3::Zero();  ///< initial velocity [m/s]
     FluidShape shape;
     Real jitter = 0;               ///< random offset of each lattice site, as a fraction of the spacing
+    Real temperature = 20;         ///< initial temperature [C], used with the heat effect
     Location at;
 };
 
@@ -145,6 +146,7 @@ struct EmitterSpec {
     Vec3 direction = -Vec3::UnitY();  ///< unit length
     Real speed = 0;                   ///< [m/s], > 0
     Real start = 0, end = 0;          ///< emission times [s]; end defaults to the last frame's time
+    Real temperature = 20;            ///< of the emitted fluid [C], used with the heat effect
     BodyMotion motion;
     Location at;
 };
@@ -198,7 +200,12 @@ struct Scene {
     /// The material of every source of fluid: the fluids, then the emitters. A particle's `fluid` attribute
     /// (present when there are several sources) indexes this list.
     std::vector<Material> sourceMaterials() const;
+    /// The initial temperature of every source of fluid, in the same order [C].
+    std::vector<Real> sourceTemperatures() const;
 };
+
+/// Reads a `motion:` map (rotation and keyframes) of a body, an emitter or a heat source.
+BodyMotion readMotion(Section m);
 
 /// Loads and validates a scene; throws SceneError (file:line:col, what, fix) or InputError.
 Scene loadScene(const std::filesystem::path& file, const Quality& quality);

@@ -256,6 +256,10 @@ void Simulation::step(Real maxDt) {
     const Real dt = chooseDt(maxDt);
     StepContext ctx = context(dt);
     m_loads.clear(m_boundary.names.size());
+    if (!m_effects[std::size_t(Stage::Heat)].empty()) {
+        ScopedTimer t(m_stats.time.heat);
+        for (auto& e : m_effects[std::size_t(Stage::Heat)]) e->apply(ctx, m_fluid);
+    }
     {
         ScopedTimer t(m_stats.time.forces);
         for (auto& e : m_effects[std::size_t(Stage::Forces)]) e->apply(ctx, m_fluid);

@@ -54,8 +54,11 @@ struct BodyReport {
 
 /// Wall time [s] spent in each part of the step, summed over the steps.
 struct StageTimes {
-    double forces = 0, pressure = 0, advect = 0, emit = 0, neighbours = 0, divergence = 0, viscosity = 0, endOfStep = 0;
-    double total() const { return forces + pressure + advect + emit + neighbours + divergence + viscosity + endOfStep; }
+    double heat = 0, forces = 0, pressure = 0, advect = 0, emit = 0, neighbours = 0, divergence = 0, viscosity = 0,
+           endOfStep = 0;
+    double total() const {
+        return heat + forces + pressure + advect + emit + neighbours + divergence + viscosity + endOfStep;
+    }
 };
 
 /// What the solvers did, summed over the steps, and what went wrong.
@@ -68,6 +71,7 @@ struct SolverStats {
     std::size_t removedParticles = 0;  ///< left the domain
     std::size_t emittedParticles = 0;  ///< added by emitters
     std::size_t boundaryContacts = 0;  ///< approaches to a boundary stopped at one particle radius
+    std::size_t heatSubsteps = 0, heatSubstepsMax = 0;  ///< conduction sub-steps, summed and the most in one step
     Real dtMin = std::numeric_limits<Real>::infinity(), dtMax = 0;
     StageTimes time;
     std::vector<std::string> warnings;  ///< the first kMaxWarnings, then only counted

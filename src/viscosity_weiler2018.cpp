@@ -44,22 +44,36 @@ ViscosityWeiler2018::ViscosityWeiler2018(const ViscosityParams& params, const Sc
     }
     const std::vector<Material> sources = scene.sourceMaterials();
     std::set<Real> distinct;
-    for (const auto& m : sources) distinct.insert(m.mu);
+    bool laws = false;
+    for (const auto& m : sources) {
+        distinct.insert(m.mu);
+        laws |= m.law.has_value();
+    }
+    // Laws of viscosity over temperature apply where particles have a temperature, i.e. with the heat effect.
+    laws = laws && scene.findEffect("heat");
     m_mu = sources.front().mu;
-    if (distinct.size() == 1) return;
-    // Fluids of different viscosity: each particle carries its own, from the fluid or emitter it came from.
-    if (!particles.findScalar("fluid"))
+    if (distinct.size() == 1 && !laws) return;
+    // Viscosity varies: each particle carries its own, from its source's material (and temperature).
+    if (sources.size() > 1 && !particles.findScalar("fluid"))
         throw std::runtime_error("viscosity: the particles do not say which fluid they belong to; sample the scene "
                                  "again with this version of ganache");
-    for (const auto& m : sources) m_sourceMu.push_back(m.mu);
+    for (const auto& m : sources) {
+        m_sourceMu.push_back(m.mu);
+        m_sourceLaw.push_back(laws ? m.law : std::nullopt);
+    }
     m_muPerParticle = &particles.addScalar("viscosity");
     refreshViscosity(particles);
 }
 
 void ViscosityWeiler2018::refreshViscosity(const ParticleSet& particles) {
-    const auto& source = *particles.findScalar("fluid");
+    const std::vector<Real>* source = particles.findScalar("fluid");
+    const std::vector<Real>* temperature = particles.findScalar("temperature");
     auto& mu = *m_muPerParticle;
-    forEachParticle(particles.size(), [&](std::size_t i) { mu[i] = m_sourceMu.at(std::size_t(source[i])); }, 4096);
+    forEachParticle(particles.size(), [&](std::size_t i) {
+        const std::size_t s = source ? std::size_t((*source)[i]) : 0;
+        const auto& law = m_sourceLaw[s];
+        mu[i] = law && temperature ? law->at((*temperature)[i]) : m_sourceMu[s];
+    }, 4096);
 }
 
 Real ViscosityWeiler2018::pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
@@ -108,7 +122,8 @@ void ViscosityWeiler2018::apply(StepContext& ctx, ParticleSet& particles) {
     const Real dt = ctx.dt;
     const bool sticky = m_params.boundaryMu > 0;
     for (auto* a : {&m_b, &m_x, &m_r, &m_z, &m_p, &m_q}) a->resize(n);
-    if (m_muPerParticle) refreshViscosity(particles);  // emitters may have added particles since the last solve
+    // Temperatures change every step, and emitters may have added particles since the last solve.
+    if (m_muPerParticle) refreshViscosity(particles);
     // With coupled passes the solve runs several times a step, each on the velocity the latest pressure solve
     // left. A later pass first takes back the previous pass's change dv (a pass replaces it, it does not add a
     // second dt of viscosity) and starts from v + dv, which is the current velocity. The first pass of a step

@@ -13,7 +13,8 @@ std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vect
 
 /// Solves (I - dt A) v = b for the velocities after the divergence-free solve [WKBB18 Eq. 8-12] with
 /// matrix-free preconditioned conjugate gradients. Per pair, mass and viscosity are averaged, so the system is
-/// symmetric positive definite. Holds a per-particle viscosity only when the scene's fluids differ in it.
+/// symmetric positive definite. Holds a per-particle viscosity only when the scene's fluids differ in it or melt
+/// (a material with a viscosity law in a scene with the heat effect).
 class ViscosityWeiler2018 final : public Effect {
 public:
     ViscosityWeiler2018(const ViscosityParams& params, const Scene& scene, ParticleSet& particles);
@@ -29,14 +30,15 @@ private:
                          const Vec3& xij) const;
     Real boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k, const Vec3& xik) const;
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles) const;
-    void refreshViscosity(const ParticleSet& particles);  // mu of each particle from its `fluid` attribute
+    void refreshViscosity(const ParticleSet& particles);  // mu of each particle from its source and temperature
     void multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out) const;
 
     ViscosityParams m_params;
     Real m_mu = 0;
     std::vector<Real>* m_muPerParticle = nullptr;  // attribute `viscosity`, only when viscosities differ
-    std::vector<Real> m_sourceMu;                  // mu of each fluid and emitter, when they differ
+    std::vector<Real> m_sourceMu;                  // mu of each fluid and emitter, when viscosity varies
+    std::vector<std::optional<ViscosityLaw>> m_sourceLaw;  // their laws over temperature, with the heat effect
     std::vector<Vec3>* m_dv;                       // attribute `_viscosity_dv`: the last pass's change
     std::vector<Vec3> m_b, m_x, m_r, m_z, m_p, m_q;
     std::vector<Mat3> m_inverseDiagonal;

@@ -181,3 +181,35 @@ effects: {gravity: {}, viscosity: {mu: 1000}}
     EXPECT_NEAR(force.y(), -mass * 9.81, 0.05 * mass * 9.81);
     EXPECT_LT(std::abs(force.x()) + std::abs(force.z()), 0.01 * mass * 9.81);
 }
+
+TEST(Stability, MeltingFromAlmostSolidToRunny) {
+    // A chocolate block (5e6 Pa s at 20 C) on a floor held at 80 C under a lamp: it warms through (a made-up
+    // conductivity of 3000 W/(m K) so the whole block melts in the test's time) and falls to the law's 100 Pa s,
+    // slumping under gravity. The four stability properties must hold across the transition.
+    const Scene scene = sceneFromText("melting", R"(particles: {radius: 0.005}
+domain: {min: [-0.2, -0.1, -0.2], max: [0.2, 0.3, 0.2]}
+materials: {fast_chocolate: {base: chocolate, conductivity: 3000}}
+fluids: [{material: fast_chocolate, temperature: 20, box: {min: [-0.04, 0.011, -0.04], max: [0.04, 0.091, 0.04]}}]
+boundaries: [{name: floor, plane: {point: [0, 0, 0], normal: [0, 1, 0]}}]
+effects:
+  gravity: {}
+  viscosity: {boundary_mu: 100}
+  heat:
+    bodies: {floor: {temperature: 80}}
+    sources: [{sphere: {centre: [0, 0.2, 0]}, intensity: 2.0e6, radius: 0.1}]
+)");
+    Simulation sim = simulationOf(scene);
+    const Snapshot start = snapshot(sim.particles());
+    const auto& mu = *sim.particles().findScalar("viscosity");
+    EXPECT_DOUBLE_EQ(*std::max_element(mu.begin(), mu.end()), 5e6);
+    sim.advanceTo(0.6);
+    expectStable(sim, start, Vec3(-0.2, 0, -0.2), Vec3(0.2, 0.3, 0.2), "melting");
+    const auto& muEnd = *sim.particles().findScalar("viscosity");
+    const Real lowest = *std::min_element(muEnd.begin(), muEnd.end());
+    std::size_t runny = 0;
+    for (Real m : muEnd) runny += m < 1000;
+    std::printf("melting: lowest mu %.4g Pa s, %zu of %zu particles below 1000 Pa s, %.1f heat sub-steps per step\n",
+                lowest, runny, muEnd.size(), double(sim.stats().heatSubsteps) / double(sim.stats().steps));
+    EXPECT_LT(lowest, 150.0);
+    EXPECT_GT(runny, muEnd.size() / 2);
+}
