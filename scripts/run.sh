@@ -3,4 +3,4 @@
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 source scripts/setup.sh
-./build/src/ganache run scenes/dam_break.yaml "$@"
+./build/src/ganache run scenes/chocolate_bunny.yaml "$@"

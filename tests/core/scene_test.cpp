@@ -112,7 +112,8 @@ TEST(Scene, ReadsEveryPartOfTheTinyScene) {
 TEST(Scene, ExplainedSceneLoadsBackToTheSameEffectiveScene) {
     for (const fs::path& file :
          {kSource / "tests/scenes/tiny.yaml", kSource / "tests/scenes/pour.yaml",
-          kSource / "tests/scenes/bunny_on_bars.yaml", kSource / "scenes/dam_break.yaml"}) {
+          kSource / "tests/scenes/bunny_on_bars.yaml", kSource / "scenes/dam_break.yaml",
+          kSource / "scenes/chocolate_bunny.yaml", kSource / "scenes/chocolate_bunny_lamp.yaml"}) {
         const Scene s = loadScene(file, Quality::parse("final"));
         const std::string text = explainScene(s);
         EXPECT_NE(text.find("radius: 0."), std::string::npos);
