@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <tuple>
 
 namespace ganache {
 
@@ -36,22 +37,12 @@ HeatSource readSource(Section s, std::size_t index) {
         Section pl = *s.child("plane");
         src.plane = true;
         src.point = pl.vec3("point", src.point, "m");
-        const Vec3 n = pl.vec3("normal", src.normal, "unit vector");
-        if (n.norm() < 1e-12)
-            pl.fail("normal", pl.path() + ".normal must not be the zero vector", "e.g. `normal: [0, 1, 0]`");
-        src.normal = n.normalized();
+        src.normal = pl.direction("normal", src.normal);
         pl.rejectUnused();
     }
     src.intensity = s.number("intensity", std::nullopt, "W/m^2 at the source", Bounds::nonNegative());
     src.radius = s.positive("radius", std::nullopt, "m (the intensity halves at this distance)");
-    src.start = s.number("start", src.start, "s", Bounds::nonNegative());
-    if (s.has("end")) {
-        src.end = s.number("end", std::nullopt, "s", Bounds::nonNegative());
-        if (!(src.end > src.start))
-            s.fail("end", fmt::format("{}.end ({} s) must come after start ({} s)", s.path(), formatNumber(src.end),
-                                      formatNumber(src.start)),
-                   "make end later than start, or leave it out to keep the source on");
-    }
+    std::tie(src.start, src.end) = readTimeWindow(s, std::nullopt);
     if (auto m = s.child("motion")) src.motion = readMotion(*m);
     s.rejectUnused();
     return src;

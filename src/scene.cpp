@@ -8,7 +8,9 @@
 
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <sstream>
+#include <tuple>
 
 namespace ganache {
 
@@ -222,13 +224,21 @@ FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& c
 
 }  // namespace
 
+std::pair<Real, Real> readTimeWindow(Section& s, std::optional<Real> defaultEnd) {
+    const Real start = s.number("start", 0, "s", Bounds::nonNegative());
+    if (!defaultEnd && !s.has("end")) return {start, std::numeric_limits<Real>::infinity()};
+    const Real end = s.number("end", defaultEnd, defaultEnd ? "s (default: the last frame)" : "s", Bounds::nonNegative());
+    if (!(end > start))
+        s.fail("end", fmt::format("{}.end ({} s) must come after start ({} s)", s.path(), formatNumber(end),
+                                  formatNumber(start)),
+               defaultEnd ? "make end later than start" : "make end later than start, or leave it out to never end");
+    return {start, end};
+}
+
 BodyMotion readMotion(Section m) {
     BodyMotion mo;
     if (auto rot = m.child("rotation")) {
-        const Vec3 axis = rot->vec3("axis", mo.axis, "unit vector");
-        if (axis.norm() < 1e-12)
-            rot->fail("axis", rot->path() + ".axis must not be the zero vector", "e.g. `axis: [0, 1, 0]`");
-        mo.axis = axis.normalized();
+        mo.axis = rot->direction("axis", mo.axis);
         mo.centre = rot->vec3("centre", mo.centre, "m");
         mo.angularVelocity = rot->number("angular_velocity", std::nullopt, "rad/s");
         rot->rejectUnused();
@@ -300,10 +310,7 @@ BoundarySpec readBoundary(Section s, std::size_t index, Real particleRadius) {
         Section ps = *s.child("plane");
         PlaneBoundary plane;
         plane.point = ps.vec3("point", plane.point, "m");
-        const Vec3 n = ps.vec3("normal", plane.normal, "unit vector");
-        if (n.norm() < 1e-12)
-            ps.fail("normal", ps.path() + ".normal must not be the zero vector", "e.g. `normal: [0, 1, 0]` for a floor");
-        plane.normal = n.normalized();
+        plane.normal = ps.direction("normal", plane.normal);
         ps.rejectUnused();
         b.shape = plane;
     } else if (shape == "mesh") {
@@ -334,18 +341,10 @@ EmitterSpec readEmitter(Section s, std::size_t index, const Scene& scene, const 
         e.nozzle = rect;
     }
     e.position = s.vec3("position", std::nullopt, "m");
-    const Vec3 dir = s.vec3("direction", e.direction, "unit vector");
-    if (dir.norm() < 1e-12)
-        s.fail("direction", s.path() + ".direction must not be the zero vector", "e.g. `direction: [0, -1, 0]`");
-    e.direction = dir.normalized();
+    e.direction = s.direction("direction", e.direction);
     e.speed = s.positive("speed", std::nullopt, "m/s");
     e.temperature = s.number("temperature", e.temperature, "C (used with the heat effect)", Bounds{-273.15, 1e4});
-    e.start = s.number("start", e.start, "s", Bounds::nonNegative());
-    e.end = s.number("end", scene.frames.timeOf(scene.frames.end), "s (default: the last frame)", Bounds::nonNegative());
-    if (!(e.end > e.start))
-        s.fail("end", fmt::format("{}.end ({} s) must come after start ({} s)", s.path(), formatNumber(e.end),
-                                  formatNumber(e.start)),
-               "make end later than start");
+    std::tie(e.start, e.end) = readTimeWindow(s, scene.frames.timeOf(scene.frames.end));
     if (auto m = s.child("motion")) e.motion = readMotion(*m);
     s.rejectUnused();
 

@@ -204,6 +204,10 @@ struct Scene {
     std::vector<Real> sourceTemperatures() const;
 };
 
+/// Reads `start` (default 0) and `end` [s] of something that acts for a while; end must come after start. With no
+/// defaultEnd, an absent end never comes (infinity, not recorded in the effective scene).
+std::pair<Real, Real> readTimeWindow(Section& s, std::optional<Real> defaultEnd);
+
 /// Reads a `motion:` map (rotation and keyframes) of a body, an emitter or a heat source.
 BodyMotion readMotion(Section m);
 

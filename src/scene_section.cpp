@@ -227,6 +227,14 @@ Vec3 Section::vec3(const std::string& key, std::optional<Vec3> fallback, const s
     return v;
 }
 
+Vec3 Section::direction(const std::string& key, std::optional<Vec3> fallback) {
+    const Vec3 v = vec3(key, fallback, "unit vector");
+    if (v.norm() < 1e-12)
+        fail(key, keyPath(key) + " must not be the zero vector",
+             fmt::format("give a direction, e.g. `{}: [0, 1, 0]`", key));
+    return v.normalized();
+}
+
 bool Section::boolean(const std::string& key, bool fallback) {
     const YAML::Node n = value(key);
     bool v = fallback;

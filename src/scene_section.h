@@ -58,6 +58,8 @@ public:
     std::int64_t integer(const std::string& key, std::optional<std::int64_t> fallback, std::int64_t lo,
                          std::int64_t hi);
     Vec3 vec3(const std::string& key, std::optional<Vec3> fallback, const std::string& unit);
+    /// A direction: a non-zero [x, y, z], returned normalised (the value read is recorded as given).
+    Vec3 direction(const std::string& key, std::optional<Vec3> fallback);
     bool boolean(const std::string& key, bool fallback);
     /// A name: letters, digits, '_' and '-'.
     std::string name(const std::string& key, std::optional<std::string> fallback);
