@@ -55,6 +55,7 @@ Emitters::Emitters(const Scene& scene, Real particleRadius) : m_spacing(2 * part
         Nozzle n;
         n.spec = scene.emitters[e];
         n.sites = nozzleSites(n.spec, particleRadius);
+        for (const Vec3& s : n.sites) n.reach = std::max(n.reach, s.norm());
         n.mass = latticeMass(m_spacing, n.spec.material.density, kernel);
         n.travelled = m_spacing;  // the first layer leaves as emission starts
         n.sourceIndex = std::uint32_t(scene.fluids.size() + e);
@@ -73,7 +74,7 @@ void Emitters::emit(Real t0, Real dt, ParticleSet& particles, std::uint64_t& nex
         const Real last = std::min(t1, n.spec.end);
         // Round-off in the sum of travelled distances must not drop a layer that leaves exactly at `end`.
         while (n.travelled >= m_spacing * (1 - 1e-9)) {
-            // This layer left the nozzle when the fluid had travelled one spacing; since then it moved `ahead`.
+            // This layer left the nozzle when the fluid had travelled one spacing, `travelled - spacing` ago.
             const Real left = std::max(n.spec.start, last - std::max<Real>(0, n.travelled - m_spacing) / n.spec.speed);
             emitLayer(n, e, left, last - left, particles, nextId, stats);
             n.travelled -= m_spacing;
@@ -89,13 +90,11 @@ void Emitters::emitLayer(Nozzle& n, std::size_t index, Real t, Real age, Particl
     const Vec3 direction = rotation * n.spec.direction;
 
     // Fluid still near the opening (a stream that backs up) blocks the sites it covers.
-    Real reach = 0;
-    for (const Vec3& s : n.sites) reach = std::max(reach, s.norm());
     const Real blockDistance = kBlockedFraction * m_spacing;
     const Vec3 layerCentre = centre + age * (n.spec.speed * direction + motion.velocity(centre, t));
     std::vector<Vec3> nearby;
     for (const Vec3& x : particles.x())
-        if ((x - layerCentre).norm() <= reach + 2 * blockDistance) nearby.push_back(x);
+        if ((x - layerCentre).norm() <= n.reach + 2 * blockDistance) nearby.push_back(x);
 
     std::vector<Real>* source = particles.findScalar("fluid");
     std::vector<Real>* temperature = particles.findScalar("temperature");

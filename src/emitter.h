@@ -44,6 +44,7 @@ private:
     struct Nozzle {
         EmitterSpec spec;
         std::vector<Vec3> sites;  // at t = 0
+        Real reach = 0;           // of the farthest site from the centre [m]
         Real mass = 0;
         Real travelled = 0;       // distance the fluid has left the nozzle since the last layer [m]
         std::uint32_t sourceIndex = 0;  // in Scene::sourceMaterials()

@@ -130,7 +130,8 @@ public:
         if (!particles.findScalar("temperature")) {
             const std::vector<Real> start = scene.sourceTemperatures();
             auto& t = particles.addScalar("temperature");
-            for (std::size_t i = 0; i < particles.size(); ++i) t[i] = start.at(sourceOf(particles, i));
+            const std::vector<Real>* fluid = particles.findScalar("fluid");
+            for (std::size_t i = 0; i < particles.size(); ++i) t[i] = start.at(sourceIndex(fluid, i));
         }
         m_bodyTemperature.assign(scene.boundaries.size(), std::numeric_limits<Real>::quiet_NaN());
         m_bodyConductivity.assign(scene.boundaries.size(), -1);
@@ -150,7 +151,7 @@ public:
         const auto& m = particles.mass();
         const auto& rho = ctx.density;
         const std::vector<Real>* fluid = particles.findScalar("fluid");
-        auto source = [fluid](std::size_t i) { return fluid ? std::size_t((*fluid)[i]) : std::size_t(0); };
+        auto source = [fluid](std::size_t i) { return sourceIndex(fluid, i); };
 
         // Conduction [Eq. 15-16], written per pair so that the heat one particle gains the other loses:
         // m_i c_i dT_i/dt = 2 sum_j k_ij V_i V_j (T_i - T_j) F_ij, with F_ij <= 0 and k_ij the mean conductivity;
@@ -219,11 +220,6 @@ public:
     }
 
 private:
-    static std::size_t sourceOf(const ParticleSet& p, std::size_t i) {
-        const std::vector<Real>* f = p.findScalar("fluid");
-        return f ? std::size_t((*f)[i]) : 0;
-    }
-
     HeatParams m_params;
     Real m_particleArea;
     std::vector<Real> m_conductivity, m_capacity;  // per source of fluid

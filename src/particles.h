@@ -64,6 +64,12 @@ private:
     std::set<std::string> m_uncached;
 };
 
+/// Which source of fluid (index in Scene::sourceMaterials()) particle i came from, given the set's `fluid`
+/// attribute; a set without one has a single source, 0.
+inline std::size_t sourceIndex(const std::vector<Real>* fluidAttribute, std::size_t i) {
+    return fluidAttribute ? std::size_t((*fluidAttribute)[i]) : 0;
+}
+
 /// Boundary particles of one body (Akinci et al. 2012): positions and volumes. The pseudo-mass a fluid
 /// particle sees is Psi_k = rho_0 V_k with its own rest density rho_0, so several fluids share one wall.
 struct BoundaryBody {

@@ -130,11 +130,13 @@ std::string RunReport::table() const {
     if (!m_simulation.is_null()) {
         const auto& ms = m_simulation["per_step_ms"];
         const auto& sv = m_simulation["solver"];
-        t += fmt::format("  {} steps, per step: neighbours {:.2f} ms, pressure {:.2f} ms, divergence {:.2f} ms, "
+        const double heat = ms["heat"].get<double>();
+        t += fmt::format("  {} steps, per step: {}neighbours {:.2f} ms, pressure {:.2f} ms, divergence {:.2f} ms, "
                          "viscosity {:.2f} ms, total {:.2f} ms\n",
-                         m_simulation["steps"].get<std::size_t>(), ms["neighbours"].get<double>(),
-                         ms["pressure"].get<double>(), ms["divergence"].get<double>(), ms["viscosity"].get<double>(),
-                         ms["total"].get<double>());
+                         m_simulation["steps"].get<std::size_t>(),
+                         heat > 0 ? fmt::format("heat {:.2f} ms, ", heat) : std::string(),
+                         ms["neighbours"].get<double>(), ms["pressure"].get<double>(), ms["divergence"].get<double>(),
+                         ms["viscosity"].get<double>(), ms["total"].get<double>());
         t += fmt::format("  iterations: pressure {:.1f}/step, divergence {:.1f}/step, viscosity CG {:.1f}/solve\n",
                          sv["pressure_iterations_per_step"].get<double>(),
                          sv["divergence_iterations_per_step"].get<double>(),

@@ -168,8 +168,10 @@ void Simulation::keepOffBoundaries(StepContext& ctx) {
     const auto& x = m_fluid.x();
     auto& v = m_fluid.v();
     const auto& b = m_boundary;
-    std::vector<Vec3> change(x.size(), Vec3::Zero());
-    std::vector<std::uint32_t> nearest(x.size(), 0);
+    auto& change = m_contactChange;
+    auto& nearest = m_contactNearest;
+    change.assign(x.size(), Vec3::Zero());
+    nearest.assign(x.size(), 0);
     forEachParticle(x.size(), [&](std::size_t i) {
         Vec3 towardWall = Vec3::Zero();
         Real closest2 = std::numeric_limits<Real>::infinity();

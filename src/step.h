@@ -1,11 +1,12 @@
 #pragma once
 // One simulation step, filled with the effects a scene asks for. With simulation.viscosity_coupling = 0 it is
 // Algorithm 1 of Weiler et al. 2018:
-//   forces (gravity, ...) -> CFL time step -> constant-density solve [BK17] -> advection -> neighbour search,
-//   densities, DFSPH factors -> divergence-free solve [BK17] -> viscosity [WKBB18] -> end of step
+//   heat -> forces (gravity, ...) -> CFL time step -> constant-density solve [BK17] -> advection -> neighbour
+//   search, densities, DFSPH factors -> divergence-free solve [BK17] -> viscosity [WKBB18] -> end of step
 // With n > 0 (default 3) the constant-density solve and the viscosity solve alternate n times before advection
 // and the divergence-free solve ends the step. Emitters (when the scene has any) add their layers right after
-// advection, so the neighbour search, densities and factors that follow include the new particles.
+// advection, so the neighbour search, densities and factors that follow include the new particles. Just before
+// advection, approaches to boundaries closer than one particle radius are taken out (keepOffBoundaries).
 
 #include "effect.h"
 #include "emitter.h"
@@ -145,6 +146,8 @@ private:
     UniformGrid m_fluidGrid, m_boundaryGrid;
     NeighbourList m_fluidNeighbours, m_boundaryNeighbours;
     std::vector<Real> m_density;
+    std::vector<Vec3> m_contactChange;            // keepOffBoundaries' scratch, kept between steps
+    std::vector<std::uint32_t> m_contactNearest;
     std::vector<Real>* m_restDensity;  // a particle attribute, so it moves with reordering and removal
 
     std::unique_ptr<PressureDFSPH> m_pressure;

@@ -70,7 +70,7 @@ void ViscosityWeiler2018::refreshViscosity(const ParticleSet& particles) {
     const std::vector<Real>* temperature = particles.findScalar("temperature");
     auto& mu = *m_muPerParticle;
     forEachParticle(particles.size(), [&](std::size_t i) {
-        const std::size_t s = source ? std::size_t((*source)[i]) : 0;
+        const std::size_t s = sourceIndex(source, i);
         const auto& law = m_sourceLaw[s];
         mu[i] = law && temperature ? law->at((*temperature)[i]) : m_sourceMu[s];
     }, 4096);
