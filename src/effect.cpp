@@ -40,7 +40,10 @@ std::shared_ptr<const EffectParams> readViscosity(Section& s) {
     p->boundaryMu = s.number("boundary_mu", p->boundaryMu, "Pa s", Bounds::nonNegative());
     p->tolerance = s.number("tolerance", p->tolerance, "relative residual", Bounds{0, 1, true, true});
     p->maxIterations = s.integer("max_iterations", p->maxIterations, 1, 100000);
-    p->blockJacobi = s.choice("preconditioner", "block_jacobi", {"block_jacobi", "none"}) == "block_jacobi";
+    const std::string preconditioner = s.choice("preconditioner", "rigid", {"rigid", "block_jacobi", "none"});
+    p->preconditioner = preconditioner == "none"           ? ViscosityParams::Preconditioner::None
+                        : preconditioner == "block_jacobi" ? ViscosityParams::Preconditioner::BlockJacobi
+                                                           : ViscosityParams::Preconditioner::Rigid;
     p->warmStart = s.boolean("warm_start", p->warmStart);
     return p;
 }

@@ -39,7 +39,9 @@ struct ViscosityParams : EffectParams {
     /// at 1e-4 it keeps it to 0.01 %.
     Real tolerance = 1e-4;
     std::int64_t maxIterations = 100;
-    bool blockJacobi = true;     ///< 3x3 block-Jacobi preconditioner (false: none)
+    /// none, 3x3 block Jacobi, or block Jacobi plus the fluid's rigid motions as a coarse space (two-level)
+    enum class Preconditioner { None, BlockJacobi, Rigid };
+    Preconditioner preconditioner = Preconditioner::Rigid;
     bool warmStart = true;       ///< initial guess v_df + dv of the previous step (false: v_df)
 };
 

@@ -20,16 +20,16 @@ void forEachParticle(std::size_t n, F&& f, std::size_t grain = 512) {
     });
 }
 
-/// sum_i term(i), deterministic for any thread count.
-template <class Term>
-Real deterministicSum(std::size_t n, Term&& term) {
+/// sum_i term(i), deterministic for any thread count; T is any type with + and a zero (Real, Eigen vectors).
+template <class T = Real, class Term>
+T deterministicSum(std::size_t n, Term&& term, T zero = T(0)) {
     return tbb::parallel_deterministic_reduce(
-        tbb::blocked_range<std::size_t>(0, n, 2048), Real(0),
-        [&](const auto& r, Real s) {
+        tbb::blocked_range<std::size_t>(0, n, 2048), zero,
+        [&](const auto& r, T s) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) s += term(i);
             return s;
         },
-        std::plus<Real>());
+        [](const T& a, const T& b) -> T { return a + b; });
 }
 
 }  // namespace ganache

@@ -11,6 +11,31 @@ namespace ganache {
 std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vector<Real>& density,
                                    const NeighbourList& neighbours, const CubicSpline& kernel);
 
+using Vec6 = Eigen::Matrix<Real, 6, 1>;
+using Mat6 = Eigen::Matrix<Real, 6, 6>;
+
+/// The rigid motions of all fluid particles together (three translations, three rotations about their centroid)
+/// as a coarse space for the viscosity solve. The viscous coupling between fluid particles leaves rigid motion
+/// alone, so within this space the system is the identity plus the (block-diagonal) boundary part.
+class RigidModes {
+public:
+    /// extra: the boundary part of each particle's diagonal block of the system, or null when there is none.
+    void build(const std::vector<Vec3>& x, const std::vector<Mat3>* extra, Real minScale);
+    /// Z^T r: the total of r and its moment about the centroid.
+    Vec6 project(const std::vector<Vec3>& x, const std::vector<Vec3>& r) const;
+    /// (Z^T M Z)^+ y: the rigid motion whose image under the system has the projection y.
+    Vec6 solve(const Vec6& y) const { return m_inverse * y; }
+    /// The velocity of the rigid motion y at position xi.
+    Vec3 velocity(const Vec6& y, const Vec3& xi) const { return y.head<3>() + y.tail<3>().cross(arm(xi)); }
+
+private:
+    Vec3 arm(const Vec3& xi) const { return (xi - m_centre) / m_scale; }  // scaled to keep Z^T M Z balanced
+
+    Vec3 m_centre = Vec3::Zero();
+    Real m_scale = 1;
+    Mat6 m_inverse = Mat6::Zero();
+};
+
 /// Solves (I - dt A) v = b for the velocities after the divergence-free solve [WKBB18 Eq. 8-12] with
 /// matrix-free preconditioned conjugate gradients. Per pair, mass and viscosity are averaged, so the system is
 /// symmetric positive definite. Holds a per-particle viscosity only when the scene's fluids differ in it or melt
@@ -29,7 +54,7 @@ private:
     Real pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
                          const Vec3& xij) const;
     Real boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k, const Vec3& xik) const;
-    void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles) const;
+    void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, bool firstPass);
     void refreshViscosity(const ParticleSet& particles);  // mu of each particle from its source and temperature
     void multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out) const;
@@ -42,6 +67,9 @@ private:
     std::vector<Vec3>* m_dv;                       // attribute `_viscosity_dv`: the last pass's change
     std::vector<Vec3> m_b, m_x, m_r, m_z, m_p, m_q;
     std::vector<Mat3> m_inverseDiagonal;
+    std::vector<Mat3> m_boundaryBlock;  // -dt times the boundary part of each diagonal block, with boundary_mu > 0
+    RigidModes m_rigid;
+    BodyLoads m_passLoads;  // the viscous loads of the latest pass, which a later pass of the step replaces
     std::size_t m_lastStep = 0;
     bool m_hasSolved = false;
     std::size_t m_lastIterations = 0;

@@ -141,13 +141,19 @@ frames: {end: 25}
 )");
     Simulation sim = simulationOf(scene);
     sim.advanceTo(1);
+    // A layer emitted in the last step sits where it was placed, up to 3/4 of a spacing from older fluid, and
+    // has not met a constant-density solve yet: only particles that have are held to the 10 %.
+    const std::uint64_t solvedIds = sim.particles().size();  // ids count up from 0 and none were removed
+    sim.step(0.005);
     const ParticleSet& p = sim.particles();
     ASSERT_GT(p.size(), 0u);
     const auto& rho0 = *p.findScalar("_rest_density");
     for (std::size_t i = 0; i < p.size(); ++i) {
         ASSERT_TRUE(p.x()[i].allFinite() && p.v()[i].allFinite());
         EXPECT_GT(p.x()[i].y(), 0.0) << "particle " << p.id()[i] << " below the floor";
-        EXPECT_LT(sim.density()[i] / rho0[i] - 1, 0.10) << "particle " << p.id()[i];
+        if (p.id()[i] < solvedIds) {
+            EXPECT_LT(sim.density()[i] / rho0[i] - 1, 0.10) << "particle " << p.id()[i];
+        }
         // Nothing faster than the stream plus a free fall from the nozzle (0.3 m/s, 6 cm: 1.1 m/s), with margin.
         EXPECT_LT(p.v()[i].norm(), 1.5) << "particle " << p.id()[i];
     }
