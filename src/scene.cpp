@@ -449,6 +449,33 @@ Real estimateFluidParticles(const Scene& scene, Real radius) {
     return n;
 }
 
+static SurfaceSettings readSurface(Section s, const Scene& scene) {
+    SurfaceSettings out;
+    out.requested = true;
+    out.at = s.where();
+    const std::string method = s.choice("method", "anisotropic", {"anisotropic", "smooth_spheres", "spheres"});
+    out.method = method == "spheres"          ? SurfaceMethod::Spheres
+                 : method == "smooth_spheres" ? SurfaceMethod::SmoothSpheres
+                                              : SurfaceMethod::Anisotropic;
+    out.voxelFraction = s.number("voxel_size", out.voxelFraction, "x particle radius", Bounds::closed(0.1, 2));
+    out.smoothing = s.integer("smoothing", out.smoothing, 0, 50);
+    out.mesh = s.boolean("mesh", out.mesh);
+    out.adaptivity = s.number("adaptivity", out.adaptivity, "", Bounds::closed(0, 1));
+    Section grids = s.section("grids");
+    out.densityGrid = grids.boolean("density", false);
+    out.temperatureGrid = grids.boolean("temperature", false);
+    out.velocityGrid = grids.boolean("velocity", false);
+    grids.rejectUnused();
+    out.meshTemperature = s.boolean("mesh_temperature", false);
+    s.rejectUnused();
+    // Particles carry a temperature only when the heat effect runs.
+    if ((out.temperatureGrid || out.meshTemperature) && !scene.findEffect("heat"))
+        s.fail(out.temperatureGrid ? "grids" : "mesh_temperature",
+               "temperatures are asked for, but the scene has no heat effect, so its particles carry none",
+               "add `heat: {}` under effects, or drop the temperature request");
+    return out;
+}
+
 Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     auto effective = std::make_shared<EffectiveScene>();
     Section root = openSceneFile(file, effective);
@@ -553,6 +580,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
         sim.rejectUnused();
     }
     if (auto eff = root.child("effects")) scene.effects = readEffects(*eff);
+    if (auto surface = root.child("surface")) scene.surface = readSurface(*surface, scene);
     root.rejectUnused();
     for (const auto& e : scene.effects) e.params->check(scene, e.at);
 

@@ -167,6 +167,23 @@ struct PressureSettings {
     std::int64_t minIterations = 2;
 };
 
+/// The `surface:` section: how particles become level sets and meshes (see surfacer/surfacer.h).
+enum class SurfaceMethod { Spheres, SmoothSpheres, Anisotropic };
+
+struct SurfaceSettings {
+    bool requested = false;  ///< the scene has a `surface:` section; without one the stage is not run
+    SurfaceMethod method = SurfaceMethod::Anisotropic;
+    Real voxelFraction = 0.5;        ///< voxel size / particle radius
+    std::int64_t smoothing = 2;      ///< mean-curvature smoothing iterations of the level set
+    bool mesh = true;                ///< write mesh/<scene>.####.obj
+    Real adaptivity = 0;             ///< VolumeToMesh adaptivity in [0, 1]: 0 keeps every polygon
+    bool densityGrid = false;        ///< extra grid `density` (fog volume, 0 outside to 1 deep inside)
+    bool temperatureGrid = false;    ///< extra grid `temperature` [C]
+    bool velocityGrid = false;       ///< extra grid `vel` [m/s]
+    bool meshTemperature = false;    ///< per-vertex temperature on the mesh
+    Location at;
+};
+
 struct Scene {
     std::filesystem::path file;
     std::string name;  ///< output file prefix
@@ -193,6 +210,8 @@ struct Scene {
     /// simulation.viscosity_coupling: 0 runs the viscosity solve after the divergence-free solve (the paper's
     /// order); n >= 1 alternates it n times with the constant-density solve before advection.
     std::int64_t viscosityCoupling = 3;
+
+    SurfaceSettings surface;
 
     std::shared_ptr<const EffectiveScene> effective;  ///< every value read, defaults included
 

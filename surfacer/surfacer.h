@@ -1,0 +1,76 @@
+#pragma once
+// The surfacer: fluid particles become a narrow-band level set (OpenVDB) and a triangle mesh a renderer reads.
+// OpenVDB stays behind this header: only the surfacer's own .cpp files include it.
+//
+// Three ways to turn particles into a level set (scene key surface.method):
+//  - spheres: a sphere of 1.75 r around every particle (OpenVDB ParticlesToLevelSet), moved inward by 0.54 r so
+//    that a flat lattice surface sits, on average, r above its top particles (where the lattice cells end);
+//  - smooth_spheres: Zhu & Bridson 2005 (OpenVDB's point rasterisation): distance to the weighted average of the
+//    neighbours, which fills the dips between spheres;
+//  - anisotropic: Yu & Turk 2013: each particle's kernel (support 4 r) stretched along its neighbours' spread
+//    (a principal component analysis, at most 2:1, volume kept), so thin sheets and threads stay smooth instead
+//    of beading; the surface is where the kernel sum falls to half its value inside a lattice of spacing 2 r.
+// Then mean-curvature smoothing (OpenVDB LevelSetFilter), and meshing (OpenVDB VolumeToMesh).
+
+#include "particles.h"
+#include "scene.h"
+
+#include <array>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace ganache {
+
+/// A triangle mesh with per-vertex normals and, on request, per-vertex temperatures.
+struct SurfaceMesh {
+    std::vector<Vec3> points;
+    std::vector<Vec3> normals;                          ///< unit, outward
+    std::vector<std::array<std::uint32_t, 3>> triangles;  ///< counter-clockwise seen from outside
+    std::vector<float> temperature;                     ///< per vertex, when asked for [C]
+
+    /// Enclosed volume (divergence theorem) [m^3]; meaningful for closed meshes.
+    Real volume() const;
+    /// Edges used by exactly one triangle and by more than two; both zero for a closed manifold mesh.
+    std::pair<std::size_t, std::size_t> openAndNonManifoldEdges() const;
+};
+
+/// The surface of one frame: the level set (grid `surface`), optional extra grids, and the mesh.
+class FrameSurface {
+public:
+    FrameSurface();
+    ~FrameSurface();
+    FrameSurface(FrameSurface&&) noexcept;
+    FrameSurface& operator=(FrameSurface&&) noexcept;
+
+    Real voxelSize() const;
+    std::size_t activeVoxels() const;  ///< of the level set
+    /// Signed distance at a world point (trilinear; negative inside, background outside the band) [m].
+    Real signedDistance(const Vec3& p) const;
+    const SurfaceMesh& mesh() const { return m_mesh; }
+    SurfaceMesh& mesh() { return m_mesh; }
+
+    /// Writes every grid to one .vdb file, atomically (a temporary file renamed into place).
+    void writeVdb(const std::filesystem::path& path, const std::string& sceneName, std::int64_t frame) const;
+
+private:
+    friend FrameSurface surfaceParticles(const ParticleSet&, Real, const SurfaceSettings&);
+    struct Grids;
+    std::unique_ptr<Grids> m_grids;
+    SurfaceMesh m_mesh;
+};
+
+/// Surfaces the particles (radius r of the run) as the settings ask: level set, extra grids, mesh. An empty set
+/// gives an empty level set and an empty mesh.
+FrameSurface surfaceParticles(const ParticleSet& fluid, Real particleRadius, const SurfaceSettings& settings);
+
+/// Bytes one frame is expected to need at most, from the particles' count and bounds (for the memory check).
+double estimateSurfaceBytes(const ParticleSet& fluid, Real particleRadius, const SurfaceSettings& settings);
+
+/// Writes a Wavefront OBJ atomically: `v` and `vn` per vertex, faces `f v//vn`; with temperatures, each vertex
+/// also has a texture coordinate `vt T 0` carrying its temperature in C (faces `f v/vt/vn`), the one per-vertex
+/// value every OBJ reader keeps. `header` goes in comment lines at the top.
+void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const std::string& header);
+
+}  // namespace ganache
