@@ -41,7 +41,8 @@ int main(int argc, char** argv) {
         {"sample", "turn the scene's shapes into fluid and boundary particles (writes sample/<scene>.vdb)",
          {StageId::Sample}},
         {"simulate", "simulate from the sample, writing particles/<scene>.NNNN.vdb", {StageId::Simulate}},
-        {"surface", "turn particle caches into level sets and meshes", {StageId::Surface}},
+        {"surface", "turn particle caches into level sets and meshes (writes surface/<scene>.NNNN.vdb, mesh/<scene>.NNNN.obj)",
+         {StageId::Surface}},
         {"render", "render preview images of the meshes or particles", {StageId::Render}},
     };
     std::vector<CLI::App*> subs;
@@ -49,6 +50,8 @@ int main(int argc, char** argv) {
         subs.push_back(app.add_subcommand(c.name, c.help));
         addRunArgs(subs.back());
     }
+    for (std::size_t i : {std::size_t(0), std::size_t(3)})
+        subs[i]->add_flag("--force", opt.force, "redo surface frames whose outputs are newer than their particle caches");
     bool check = false;
     subs[1]->add_flag("--check", check,
                       "print a pre-flight report of every mesh (closed or not, bad edges and faces, bounds, the "

@@ -6,13 +6,18 @@
 #include "report.h"
 #include "sampler.h"
 #include "step.h"
+#include "surfacer.h"
 
 #include <fmt/format.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
+#include <tbb/parallel_for.h>
+
 #include <cstdio>
+#include <fstream>
 #include <memory>
+#include <mutex>
 
 namespace ganache {
 
@@ -31,7 +36,6 @@ const char* stageName(StageId s) {
 // Stages this build does not have yet, and the issue that brings each.
 const char* missingStageNote(StageId s) {
     switch (s) {
-    case StageId::Surface: return "the surfacer is not part of this build yet (issue 6)";
     case StageId::Render: return "the preview renderer is not part of this build yet (issue 7)";
     default: return nullptr;
     }
@@ -131,10 +135,144 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
                              s.warningCount ? fmt::format(", {} warnings", s.warningCount) : std::string());
 }
 
+// Memory the machine can still give (MemAvailable), or infinity when it cannot be read.
+double availableBytes() {
+    std::ifstream in("/proc/meminfo");
+    std::string key;
+    double kib = 0;
+    std::string unit;
+    while (in >> key >> kib >> unit)
+        if (key == "MemAvailable:") return kib * 1024;
+    return std::numeric_limits<double>::infinity();
+}
+
+// An output is up to date when it exists and is newer than its input.
+bool upToDate(const std::filesystem::path& output, const std::filesystem::path& input) {
+    std::error_code ec;
+    const auto out = std::filesystem::last_write_time(output, ec);
+    if (ec) return false;
+    return out >= std::filesystem::last_write_time(input, ec) && !ec;
+}
+
+void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
+                bool force, int threads, RunReport& report) {
+    StageRecord& stage = report.addStage("surface");
+    const SurfaceSettings& settings = scene.surface;
+    if (!settings.requested) {
+        stage.status = "skipped";
+        stage.note = "the scene asks for no surface (no `surface:` section)";
+        return;
+    }
+    Stopwatch clock;
+    // Every input first: a missing frame is reported before any work, naming what the simulation wrote.
+    for (std::int64_t f = frames.first; f <= frames.second; ++f)
+        if (!std::filesystem::exists(layout.particles(f)))
+            throw InputError(fmt::format("surface: frame {} has no particle cache ({})\n  fix: simulate frames {}-{} "
+                                         "first (`ganache simulate {} --frames {}-{}`), or pick frames that were "
+                                         "simulated with --frames",
+                                         f, layout.particles(f).string(), frames.first, frames.second,
+                                         scene.file.string(), frames.first, frames.second));
+    std::vector<std::int64_t> todo;
+    std::size_t skipped = 0;
+    for (std::int64_t f = frames.first; f <= frames.second; ++f) {
+        const bool fresh = upToDate(layout.surface(f), layout.particles(f)) &&
+                           (!settings.mesh || upToDate(layout.mesh(f), layout.particles(f)));
+        if (fresh && !force) ++skipped;
+        else todo.push_back(f);
+    }
+    auto readFrame = [&](std::int64_t f) {
+        try {
+            return readParticleCache(layout.particles(f));
+        } catch (const std::exception& e) {
+            throw InputError(fmt::format("surface: frame {}: {}", f, e.what()));
+        }
+    };
+    std::mutex lock;
+    std::size_t done = 0, particles = 0, triangles = 0;
+    double frameSeconds = 0;
+    std::string failure;
+    Progress progress("surface", todo.size());
+    // Frames in parallel, as many at once as the memory allows (each frame is itself parallel).
+    std::size_t batch = 1;
+    for (std::size_t start = 0; start < todo.size() && failure.empty(); start += batch) {
+        const CacheContents first = readFrame(todo[start]);
+        const double need = estimateSurfaceBytes(first.fluid, scene.particleRadius, settings);
+        const double have = availableBytes();
+        if (need > 0.8 * have)
+            throw SceneError(settings.at,
+                             fmt::format("surfacing frame {} ({} particles) at a voxel of {} x the particle radius "
+                                         "needs about {:.1f} GiB, more than the {:.1f} GiB this machine has free",
+                                         todo[start], first.fluid.size(), formatNumber(settings.voxelFraction),
+                                         need / (1 << 30), have / (1 << 30)),
+                             "raise surface.voxel_size, or surface fewer frames at once on a bigger machine");
+        batch = std::size_t(std::clamp<double>(std::floor(0.8 * have / need), 1, threads));
+        const std::size_t end = std::min(todo.size(), start + batch);
+        tbb::parallel_for(std::size_t(start), end, [&](std::size_t k) {
+            const std::int64_t f = todo[k];
+            try {
+                Stopwatch frameClock;
+                const CacheContents cache = readFrame(f);
+                const FrameSurface surface = surfaceParticles(cache.fluid, scene.particleRadius, settings);
+                std::filesystem::create_directories(layout.surface(f).parent_path());
+                surface.writeVdb(layout.surface(f), scene.name, f);
+                if (settings.mesh) {
+                    std::filesystem::create_directories(layout.mesh(f).parent_path());
+                    writeObj(layout.mesh(f), surface.mesh(),
+                             fmt::format("ganache {} frame {} (t = {:.4f} s): {} particles\n"
+                                         "units: metres; y up{}",
+                                         scene.name, f, cache.info.time, cache.fluid.size(),
+                                         surface.mesh().temperature.empty()
+                                             ? ""
+                                             : "; vt u = temperature [C] per vertex"));
+                }
+                const std::lock_guard<std::mutex> guard(lock);
+                ++done;
+                particles += cache.fluid.size();
+                triangles += surface.mesh().triangles.size();
+                frameSeconds += frameClock.seconds();
+                progress.update(done);
+            } catch (const InputError& e) {
+                const std::lock_guard<std::mutex> guard(lock);
+                if (failure.empty()) failure = e.what();
+            } catch (const std::exception& e) {
+                const std::lock_guard<std::mutex> guard(lock);
+                if (failure.empty()) failure = fmt::format("surface: frame {}: {}", f, e.what());
+            }
+        });
+    }
+    progress.finish();
+    if (!failure.empty()) throw InputError(failure + "\n  (frames finished before it are complete and kept)");
+    for (std::int64_t f : todo) {
+        stage.outputs.push_back(layout.surface(f).string());
+        if (settings.mesh) stage.outputs.push_back(layout.mesh(f).string());
+    }
+    stage.seconds = clock.seconds();
+    stage.status = todo.empty() ? "skipped" : "done";
+    const char* method = settings.method == SurfaceMethod::Spheres         ? "spheres"
+                         : settings.method == SurfaceMethod::SmoothSpheres ? "smooth spheres"
+                                                                           : "anisotropic kernels";
+    stage.note = fmt::format("{} frames surfaced with {}, voxel {} r{}{}", done, method,
+                             formatNumber(settings.voxelFraction),
+                             done ? fmt::format("; {:.1f} core-us per particle per frame, {:.0f} triangles per frame",
+                                                1e6 * frameSeconds * threads / std::max<double>(1, double(particles)),
+                                                double(triangles) / double(done))
+                                  : std::string(),
+                             skipped ? fmt::format("; {} up to date, skipped (--force redoes them)", skipped)
+                                     : std::string());
+}
+
 }  // namespace
 
 std::filesystem::path OutputLayout::particles(std::int64_t frame) const {
     return root / "particles" / fmt::format("{}.{:04}.vdb", name, frame);
+}
+
+std::filesystem::path OutputLayout::surface(std::int64_t frame) const {
+    return root / "surface" / fmt::format("{}.{:04}.vdb", name, frame);
+}
+
+std::filesystem::path OutputLayout::mesh(std::int64_t frame) const {
+    return root / "mesh" / fmt::format("{}.{:04}.obj", name, frame);
 }
 
 std::pair<std::int64_t, std::int64_t> parseFrameRange(const std::string& text, const FrameRange& scene) {
@@ -184,7 +322,14 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
             continue;
         }
         if (id == StageId::Sample) runSample(scene, layout, report);
-        else runSimulate(scene, layout, frames, report);
+        else if (id == StageId::Simulate) runSimulate(scene, layout, frames, report);
+        else {
+            if (stages.size() == 1 && !scene.surface.requested)
+                throw InputError(fmt::format("ganache surface: scene '{}' ({}) has no `surface:` section\n  fix: add "
+                                             "`surface: {{}}` for the defaults (see scenes/README.md)",
+                                             scene.name, scene.file.string()));
+            runSurface(scene, layout, frames, options.force, threads, report);
+        }
     }
     report.write(layout.report());
     fmt::print(stderr, "{}", report.table());

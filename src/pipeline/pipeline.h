@@ -22,6 +22,7 @@ struct RunOptions {
     int threads = 0;                                 ///< 0: every core
     std::string quality = "preview";
     bool resume = false;
+    bool force = false;                              ///< redo frames whose outputs are up to date
 };
 
 /// The inclusive frame range "A-B" (or "A") within the scene's frames; InputError when malformed or outside.
@@ -35,6 +36,8 @@ struct OutputLayout {
     std::filesystem::path sample() const { return root / "sample" / (name + ".vdb"); }
     std::filesystem::path sampleCache() const { return root / "cache"; }  ///< sampled mesh inputs, by key
     std::filesystem::path particles(std::int64_t frame) const;
+    std::filesystem::path surface(std::int64_t frame) const;  ///< <out>/surface/<name>.NNNN.vdb
+    std::filesystem::path mesh(std::int64_t frame) const;     ///< <out>/mesh/<name>.NNNN.obj
     std::filesystem::path report() const { return root / "report.json"; }
 };
 

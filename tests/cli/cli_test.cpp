@@ -61,7 +61,11 @@ TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
     ASSERT_EQ(r.code, 0) << r.output;
     EXPECT_TRUE(fs::exists(out / "sample/tiny.vdb"));
     for (int f = 1; f <= 5; ++f) EXPECT_TRUE(fs::exists(out / ("particles/tiny.000" + std::to_string(f) + ".vdb"))) << f;
-    EXPECT_NE(r.output.find("not available"), std::string::npos) << "the missing surfacer is said, not faked";
+    for (int f = 1; f <= 5; ++f) {
+        EXPECT_TRUE(fs::exists(out / ("surface/tiny.000" + std::to_string(f) + ".vdb"))) << f;
+        EXPECT_TRUE(fs::exists(out / ("mesh/tiny.000" + std::to_string(f) + ".obj"))) << f;
+    }
+    EXPECT_NE(r.output.find("not available"), std::string::npos) << "the missing renderer is said, not faked";
 
     std::ifstream in(out / "report.json");
     const auto report = nlohmann::json::parse(in);
@@ -74,7 +78,9 @@ TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
     EXPECT_EQ(report["stages"][1]["name"], "simulate");
     EXPECT_EQ(report["stages"][1]["status"], "done");
     EXPECT_EQ(report["stages"][2]["name"], "surface");
-    EXPECT_EQ(report["stages"][2]["status"], "not available");
+    EXPECT_EQ(report["stages"][2]["status"], "done");
+    EXPECT_EQ(report["stages"][3]["name"], "render");
+    EXPECT_EQ(report["stages"][3]["status"], "not available");
     EXPECT_EQ(report["effects_requested"][0], "gravity");
     EXPECT_EQ(report["effects_ran"], report["effects_requested"]);
     EXPECT_GT(report["steps"].get<int>(), 0);
@@ -147,10 +153,46 @@ TEST(Cli, FramesLimitWhatIsWritten) {
 }
 
 TEST(Cli, MissingStagesSaySoAndFail) {
-    const fs::path out = freshDir("surface");
-    const Result r = runGanache("surface " + kTiny + " --out " + out.string());
+    const fs::path out = freshDir("render");
+    const Result r = runGanache("render " + kTiny + " --out " + out.string());
     EXPECT_EQ(r.code, 1);
     EXPECT_NE(r.output.find("not part of this build"), std::string::npos) << r.output;
+}
+
+TEST(Cli, SurfaceSkipsUpToDateFramesAndNamesBadOnes) {
+    const fs::path out = freshDir("surface");
+    // Nothing simulated yet: the first missing frame is named, nothing is written.
+    Result r = runGanache("surface " + kTiny + " --out " + out.string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find("frame 1 has no particle cache"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(out / "surface"));
+
+    ASSERT_EQ(runGanache("run " + kTiny + " --frames 1-3 --out " + out.string()).code, 0);
+    r = runGanache("surface " + kTiny + " --frames 1-3 --out " + out.string());
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("3 up to date, skipped"), std::string::npos) << r.output;
+    r = runGanache("surface " + kTiny + " --frames 2-3 --force --out " + out.string());
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("2 frames surfaced"), std::string::npos) << r.output;
+
+    // A damaged cache: the error names the frame and the file; frames already surfaced stay as they were.
+    const auto before = fs::last_write_time(out / "mesh/tiny.0001.obj");
+    std::ofstream(out / "particles/tiny.0003.vdb") << "not a cache";
+    r = runGanache("surface " + kTiny + " --frames 1-3 --force --out " + out.string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find("frame 3"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("tiny.0003.vdb"), std::string::npos) << r.output;
+    EXPECT_TRUE(fs::exists(out / "mesh/tiny.0001.obj"));
+    EXPECT_GE(fs::last_write_time(out / "mesh/tiny.0001.obj"), before);
+
+    // A scene that asks for no surface: `run` skips the stage, `surface` says what to add.
+    const fs::path plain = freshDir("no_surface") / "plain.yaml";
+    std::ifstream tiny(kTiny);
+    std::string text((std::istreambuf_iterator<char>(tiny)), std::istreambuf_iterator<char>());
+    std::ofstream(plain) << text.substr(0, text.find("surface:"));
+    r = runGanache("surface " + plain.string() + " --out " + out.string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find("no `surface:` section"), std::string::npos) << r.output;
 }
 
 TEST(Cli, BadInputExitsWithTwoAndSaysWhere) {
