@@ -6,6 +6,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -449,14 +450,27 @@ Real estimateFluidParticles(const Scene& scene, Real radius) {
     return n;
 }
 
-static SurfaceSettings readSurface(Section s, const Scene& scene) {
+const char* surfaceMethodName(SurfaceMethod method) {
+    switch (method) {
+    case SurfaceMethod::Spheres: return "spheres";
+    case SurfaceMethod::SmoothSpheres: return "smooth_spheres";
+    case SurfaceMethod::Anisotropic: return "anisotropic";
+    }
+    return "?";
+}
+
+namespace {
+
+SurfaceSettings readSurface(Section s, const Scene& scene) {
     SurfaceSettings out;
     out.requested = true;
     out.at = s.where();
-    const std::string method = s.choice("method", "anisotropic", {"anisotropic", "smooth_spheres", "spheres"});
-    out.method = method == "spheres"          ? SurfaceMethod::Spheres
-                 : method == "smooth_spheres" ? SurfaceMethod::SmoothSpheres
-                                              : SurfaceMethod::Anisotropic;
+    const std::vector<SurfaceMethod> methods{SurfaceMethod::Anisotropic, SurfaceMethod::SmoothSpheres,
+                                             SurfaceMethod::Spheres};
+    std::vector<std::string> names;
+    for (SurfaceMethod m : methods) names.push_back(surfaceMethodName(m));
+    const std::string method = s.choice("method", names.front(), names);
+    out.method = methods[std::size_t(std::find(names.begin(), names.end(), method) - names.begin())];
     out.voxelFraction = s.number("voxel_size", out.voxelFraction, "x particle radius", Bounds::closed(0.1, 2));
     out.smoothing = s.integer("smoothing", out.smoothing, 0, 50);
     out.mesh = s.boolean("mesh", out.mesh);
@@ -475,6 +489,8 @@ static SurfaceSettings readSurface(Section s, const Scene& scene) {
                "add `heat: {}` under effects, or drop the temperature request");
     return out;
 }
+
+}  // namespace
 
 Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     auto effective = std::make_shared<EffectiveScene>();

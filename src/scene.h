@@ -170,6 +170,9 @@ struct PressureSettings {
 /// The `surface:` section: how particles become level sets and meshes (see surfacer/surfacer.h).
 enum class SurfaceMethod { Spheres, SmoothSpheres, Anisotropic };
 
+/// The scene's name of a method: "spheres", "smooth_spheres" or "anisotropic".
+const char* surfaceMethodName(SurfaceMethod method);
+
 struct SurfaceSettings {
     bool requested = false;  ///< the scene has a `surface:` section; without one the stage is not run
     SurfaceMethod method = SurfaceMethod::Anisotropic;

@@ -359,13 +359,15 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSet
 }
 
 double estimateSurfaceBytes(const ParticleSet& fluid, Real r, const SurfaceSettings& settings) {
-    // The largest grid is the anisotropic kernel sum over the fluid's whole volume, plus its support around it;
-    // the others keep a band of 2 x 3 voxels. 4 bytes a voxel, doubled for the tree and the per-chunk grids.
+    // The largest grid: for anisotropic kernels the kernel sum over the fluid's whole volume (twice it, for the
+    // support around it); otherwise the narrow band, 2 x 3 voxels deep over the fluid's surface, taken as four
+    // times a cube's of the same volume (splashes and sheets have more surface). 8 bytes a voxel cover the value
+    // and the tree; 200 bytes a particle the cache and the per-particle kernels.
     const Real voxel = settings.voxelFraction * r;
     const Real volume = Real(fluid.size()) * 8 * r * r * r;
     const Real voxels = settings.method == SurfaceMethod::Anisotropic
                             ? 2 * volume / (voxel * voxel * voxel)
-                            : 6 * std::pow(volume, 2.0 / 3.0) * 2 * kHalfBand / (voxel * voxel) * 4;
+                            : 4 * 6 * std::pow(volume, 2.0 / 3.0) * 2 * kHalfBand / (voxel * voxel);
     return 8 * voxels + 200.0 * double(fluid.size());
 }
 

@@ -191,18 +191,20 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
     std::size_t done = 0, particles = 0, triangles = 0;
     double frameSeconds = 0;
     std::string failure;
-    Progress progress("surface", todo.size());
+    std::optional<Progress> progress;  // none when every frame is up to date
+    if (!todo.empty()) progress.emplace("surface", todo.size());
     // Frames in parallel, as many at once as the memory allows (each frame is itself parallel).
     std::size_t batch = 1;
     for (std::size_t start = 0; start < todo.size() && failure.empty(); start += batch) {
-        const CacheContents first = readFrame(todo[start]);
-        const double need = estimateSurfaceBytes(first.fluid, scene.particleRadius, settings);
+        // The batch's first frame sizes the batch, and is then surfaced from this same read.
+        std::optional<CacheContents> first = readFrame(todo[start]);
+        const double need = estimateSurfaceBytes(first->fluid, scene.particleRadius, settings);
         const double have = availableBytes();
         if (need > 0.8 * have)
             throw SceneError(settings.at,
                              fmt::format("surfacing frame {} ({} particles) at a voxel of {} x the particle radius "
                                          "needs about {:.1f} GiB, more than the {:.1f} GiB this machine has free",
-                                         todo[start], first.fluid.size(), formatNumber(settings.voxelFraction),
+                                         todo[start], first->fluid.size(), formatNumber(settings.voxelFraction),
                                          need / (1 << 30), have / (1 << 30)),
                              "raise surface.voxel_size, or surface fewer frames at once on a bigger machine");
         batch = std::size_t(std::clamp<double>(std::floor(0.8 * have / need), 1, threads));
@@ -211,7 +213,7 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
             const std::int64_t f = todo[k];
             try {
                 Stopwatch frameClock;
-                const CacheContents cache = readFrame(f);
+                const CacheContents cache = k == start ? std::move(*first) : readFrame(f);
                 const FrameSurface surface = surfaceParticles(cache.fluid, scene.particleRadius, settings);
                 std::filesystem::create_directories(layout.surface(f).parent_path());
                 surface.writeVdb(layout.surface(f), scene.name, f);
@@ -230,7 +232,7 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
                 particles += cache.fluid.size();
                 triangles += surface.mesh().triangles.size();
                 frameSeconds += frameClock.seconds();
-                progress.update(done);
+                progress->update(done);
             } catch (const InputError& e) {
                 const std::lock_guard<std::mutex> guard(lock);
                 if (failure.empty()) failure = e.what();
@@ -240,7 +242,7 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
             }
         });
     }
-    progress.finish();
+    if (progress) progress->finish();
     if (!failure.empty()) throw InputError(failure + "\n  (frames finished before it are complete and kept)");
     for (std::int64_t f : todo) {
         stage.outputs.push_back(layout.surface(f).string());
@@ -248,10 +250,7 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
     }
     stage.seconds = clock.seconds();
     stage.status = todo.empty() ? "skipped" : "done";
-    const char* method = settings.method == SurfaceMethod::Spheres         ? "spheres"
-                         : settings.method == SurfaceMethod::SmoothSpheres ? "smooth spheres"
-                                                                           : "anisotropic kernels";
-    stage.note = fmt::format("{} frames surfaced with {}, voxel {} r{}{}", done, method,
+    stage.note = fmt::format("{} frames surfaced with method {}, voxel {} r{}{}", done, surfaceMethodName(settings.method),
                              formatNumber(settings.voxelFraction),
                              done ? fmt::format("; {:.1f} core-us per particle per frame, {:.0f} triangles per frame",
                                                 1e6 * frameSeconds * threads / std::max<double>(1, double(particles)),

@@ -54,10 +54,6 @@ SurfaceSettings settingsFor(SurfaceMethod method) {
     return s;
 }
 
-const char* nameOf(SurfaceMethod m) {
-    return m == SurfaceMethod::Spheres ? "spheres" : m == SurfaceMethod::SmoothSpheres ? "smooth_spheres" : "anisotropic";
-}
-
 }  // namespace
 
 class EveryMethod : public ::testing::TestWithParam<SurfaceMethod> {};
@@ -79,7 +75,7 @@ TEST_P(EveryMethod, BallOfParticlesGivesAClosedSphereOfTheirVolume) {
     for (const Vec3& v : mesh.points) meanRadius += (v - centre).norm();
     meanRadius /= Real(mesh.points.size());
     std::printf("%s: %zu particles, volume %.5g vs %.5g (%+.2f %%), mean radius %.5g vs %.5g (%+.3f voxels)\n",
-                nameOf(GetParam()), p.size(), mesh.volume(), particleVolume,
+                surfaceMethodName(GetParam()), p.size(), mesh.volume(), particleVolume,
                 100 * (mesh.volume() / particleVolume - 1), meanRadius, equivalentRadius,
                 (meanRadius - equivalentRadius) / s.voxelSize());
     EXPECT_NEAR(mesh.volume() / particleVolume, 1.0, 0.03);
@@ -103,7 +99,7 @@ TEST_P(EveryMethod, EmptyFrameGivesAnEmptySurface) {
 INSTANTIATE_TEST_SUITE_P(Surfacer, EveryMethod,
                          ::testing::Values(SurfaceMethod::Spheres, SurfaceMethod::SmoothSpheres,
                                            SurfaceMethod::Anisotropic),
-                         [](const auto& p) { return std::string(nameOf(p.param)); });
+                         [](const auto& p) { return std::string(surfaceMethodName(p.param)); });
 
 TEST(Surfacer, FlatLayerGivesAFlatSurfaceWithAnisotropicKernels) {
     // A resting layer 4 particles deep whose particles sit up to 10 % of a spacing off the lattice (their top
