@@ -4,6 +4,7 @@
 #include "kernels.h"
 #include "neighbour_search.h"
 #include "parallel.h"
+#include "report.h"
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>
@@ -16,7 +17,10 @@
 #include <openvdb/tools/LevelSetRebuild.h>
 #include <openvdb/tools/LevelSetUtil.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
+#include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/PointIndexGrid.h>
+#include <openvdb/tools/Prune.h>
+#include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tools/VolumeToMesh.h>
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/parallel_reduce.h>
@@ -35,8 +39,8 @@ constexpr Real kHalfBand = 3;           // voxels each side of the surface
 // Spheres: the radius (in particle radii) that leaves no void inside a lattice of spacing 2r (sqrt 3 = 1.73 reaches
 // the centre of each lattice cube), and the inward move that brings a flat lattice's mean surface height from
 // 1.54 r (the mean of the union of spheres over a cell) back to r, where the lattice cells end.
-constexpr Real kSphereRadius = 1.75;
-constexpr Real kSphereInset = 0.54;
+constexpr Real kSphereRadius = 2.5;
+constexpr Real kSphereInset = 1.36;
 // Smooth spheres: radius and search radius (particle radii) that put a lattice ball of radius 20 r within
 // 0.2 % of its particles' volume (2 r and 4 r gave +16 %; 1 r and 2 r, -1.7 %).
 constexpr Real kSmoothRadius = 0.9;
@@ -55,6 +59,38 @@ void initialiseOpenVdb() {
 
 openvdb::math::Transform::Ptr voxelTransform(Real voxel) { return openvdb::math::Transform::createLinearTransform(voxel); }
 
+// --- the narrow band ----------------------------------------------------------------------------------------
+
+// Rasterisers leave much of the fluid's inside active (overlapping spheres; Zhu-Bridson's distances to averaged
+// positions stay small deep inside): three times the band's voxels, and the smoothing's cost with them. Keeps only
+// the voxels within the half band of a sign change; the rest reads as inside or outside by flood fill.
+void trimToBand(FloatGrid& grid) {
+    grid.tree().voxelizeActiveTiles();
+    openvdb::MaskGrid::Ptr band = openvdb::MaskGrid::create();
+    band->tree().topologyUnion(grid.tree());
+    openvdb::tree::LeafManager<openvdb::MaskTree> leaves(band->tree());
+    leaves.foreach([&](openvdb::MaskTree::LeafNodeType& leaf, std::size_t) {
+        const auto acc = grid.getConstAccessor();
+        for (auto it = leaf.cbeginValueOn(); it; ++it) {
+            const openvdb::Coord ijk = it.getCoord();
+            const bool inside = acc.getValue(ijk) < 0;
+            bool crossing = false;
+            for (int axis = 0; axis < 3 && !crossing; ++axis)
+                for (int side : {-1, 1}) {
+                    openvdb::Coord n = ijk;
+                    n[axis] += side;
+                    crossing = crossing || (acc.getValue(n) < 0) != inside;
+                }
+            if (!crossing) leaf.setValueOff(it.pos());
+        }
+    });
+    openvdb::tools::dilateActiveValues(band->tree(), int(kHalfBand), openvdb::tools::NN_FACE_EDGE_VERTEX,
+                                       openvdb::tools::IGNORE_TILES);
+    grid.tree().topologyIntersection(band->tree());
+    openvdb::tools::signedFloodFill(grid.tree());
+    openvdb::tools::pruneLevelSet(grid.tree());
+}
+
 // --- spheres -----------------------------------------------------------------------------------------------
 
 struct SphereList {
@@ -70,6 +106,7 @@ FloatGrid::Ptr spheres(const std::vector<Vec3>& x, Real r, Real voxel) {
     raster.setRmin(0.5);  // radii are in voxels; coarse voxels must not drop particles
     raster.rasterizeSpheres(SphereList{x}, kSphereRadius * r);
     raster.finalize(true);
+    trimToBand(*grid);
     openvdb::tools::LevelSetFilter<FloatGrid> filter(*grid);
     filter.offset(float(kSphereInset * r));  // a positive offset moves the surface inward
     return grid;
@@ -86,8 +123,10 @@ FloatGrid::Ptr smoothSpheres(const std::vector<Vec3>& x, Real r, Real voxel) {
     const auto index = openvdb::tools::createPointIndexGrid<openvdb::tools::PointIndexGrid>(wrapper, *pointTransform);
     const auto points = openvdb::points::createPointDataGrid<openvdb::points::NullCodec, openvdb::points::PointDataGrid>(
         *index, wrapper, *pointTransform);
-    return openvdb::points::rasterizeSmoothSpheres(*points, kSmoothRadius * r, kSmoothSearch * r, kHalfBand,
-                                                   voxelTransform(voxel));
+    FloatGrid::Ptr grid = openvdb::points::rasterizeSmoothSpheres(*points, kSmoothRadius * r, kSmoothSearch * r,
+                                                                  kHalfBand, voxelTransform(voxel));
+    trimToBand(*grid);
+    return grid;
 }
 
 // --- anisotropic kernels (Yu & Turk) -----------------------------------------------------------------------
@@ -135,6 +174,35 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     return out;
 }
 
+// Adds one kernel to a grid of kernel sums. Only voxels inside the ellipsoid are visited: along each row of the
+// z axis (the fastest-varying axis of a leaf's buffer) the ellipsoid is an interval, found from a quadratic; the
+// values go straight into the leaf buffers (their voxels are switched on once per chunk, see kernelSumField).
+void addKernel(FloatGrid::Accessor& acc, const Ellipsoid& e, const CubicSpline& w, Real weight, Real voxel) {
+    using Leaf = openvdb::FloatTree::LeafNodeType;
+    const Real support = w.supportRadius();
+    const Vec3 lo = ((e.centre - e.extent) / voxel).array().ceil();
+    const Vec3 hi = ((e.centre + e.extent) / voxel).array().floor();
+    const Vec3 step = voxel * e.shape.col(2);  // A y changes by this from one z voxel to the next
+    const Real stepSquared = step.squaredNorm();
+    for (int a = int(lo.x()); a <= int(hi.x()); ++a)
+        for (int b = int(lo.y()); b <= int(hi.y()); ++b) {
+            // |u + c step| < support for the voxel c of this row, u = A y at c = 0.
+            const Vec3 u = e.shape * (Vec3(a, b, 0) * voxel - e.centre);
+            const Real half = u.dot(step) / stepSquared;
+            const Real discriminant = half * half - (u.squaredNorm() - support * support) / stepSquared;
+            if (discriminant <= 0) continue;
+            const Real root = std::sqrt(discriminant);
+            const int first = std::max(int(lo.z()), int(std::ceil(-half - root)));
+            const int last = std::min(int(hi.z()), int(std::floor(-half + root)));
+            Leaf* leaf = nullptr;
+            for (int c = first; c <= last; ++c) {
+                if (!leaf || (c & 7) == 0) leaf = acc.touchLeaf(openvdb::Coord(a, b, c));
+                const Real value = w.W((u + c * step).norm());
+                leaf->buffer().data()[Leaf::coordToOffset(openvdb::Coord(a, b, c))] += float(weight * value);
+            }
+        }
+}
+
 // The particles' kernel sum, each particle weighing one lattice cell (2r)^3, on voxels; then iso minus that, so
 // that the inside is negative. Deterministic: fixed chunks merged in a fixed order.
 FloatGrid::Ptr kernelSumField(const std::vector<Ellipsoid>& kernels, Real r, Real voxel, Real iso) {
@@ -152,19 +220,10 @@ FloatGrid::Ptr kernelSumField(const std::vector<Ellipsoid>& kernels, Real r, Rea
         [&](const tbb::blocked_range<std::size_t>& range, Body g) {
             if (!g) g = makeGrid();  // each chunk its own grid: the identity (null) is shared by all
             auto acc = g->getAccessor();
-            for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                const Ellipsoid& e = kernels[i];
-                const Vec3 lo = ((e.centre - e.extent) / voxel).array().ceil();
-                const Vec3 hi = ((e.centre + e.extent) / voxel).array().floor();
-                for (int a = int(lo.x()); a <= int(hi.x()); ++a)
-                    for (int b = int(lo.y()); b <= int(hi.y()); ++b)
-                        for (int c = int(lo.z()); c <= int(hi.z()); ++c) {
-                            const Real value = w.W((e.shape * (Vec3(a, b, c) * voxel - e.centre)).norm());
-                            if (value == 0) continue;
-                            const openvdb::Coord ijk(a, b, c);
-                            acc.setValue(ijk, acc.getValue(ijk) + float(cellVolume * value));
-                        }
-            }
+            for (std::size_t i = range.begin(); i != range.end(); ++i) addKernel(acc, kernels[i], w, cellVolume, voxel);
+            // Voxels were written through the leaf buffers: switch on every voxel of the touched leaves (those
+            // left at zero read as "no particle near", the same as the background).
+            for (auto leaf = g->tree().beginLeaf(); leaf; ++leaf) leaf->setValuesOn();
             return g;
         },
         [](Body a, Body b) {
@@ -305,15 +364,20 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSet
     FrameSurface out;
     FloatGrid::Ptr& surface = out.m_grids->surface;
     const std::vector<Vec3>& x = fluid.x();
+    SurfaceTimings& timings = out.m_timings;
     if (x.empty()) {
         surface = openvdb::createLevelSet<FloatGrid>(voxel, kHalfBand);
     } else {
-        switch (settings.method) {
-        case SurfaceMethod::Spheres: surface = spheres(x, r, voxel); break;
-        case SurfaceMethod::SmoothSpheres: surface = smoothSpheres(x, r, voxel); break;
-        case SurfaceMethod::Anisotropic: surface = anisotropic(x, r, voxel); break;
+        {
+            const ScopedTimer timer(timings.levelSet);
+            switch (settings.method) {
+            case SurfaceMethod::Spheres: surface = spheres(x, r, voxel); break;
+            case SurfaceMethod::SmoothSpheres: surface = smoothSpheres(x, r, voxel); break;
+            case SurfaceMethod::Anisotropic: surface = anisotropic(x, r, voxel); break;
+            }
         }
         if (settings.smoothing > 0) {
+            const ScopedTimer timer(timings.smoothing);
             openvdb::tools::LevelSetFilter<FloatGrid> filter(*surface);
             for (std::int64_t k = 0; k < settings.smoothing; ++k) filter.meanCurvature();
         }
@@ -321,6 +385,7 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSet
     surface->setName("surface");
     surface->setGridClass(openvdb::GRID_LEVEL_SET);
 
+    Stopwatch gridClock;
     if (settings.densityGrid) {
         FloatGrid::Ptr fog = surface->deepCopy();
         openvdb::tools::sdfToFogVolume(*fog);
@@ -344,7 +409,9 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSet
         vel->setVectorType(openvdb::VEC_CONTRAVARIANT_RELATIVE);
         out.m_grids->extra.push_back(vel);
     }
+    timings.grids = gridClock.seconds();
     if (settings.mesh) {
+        const ScopedTimer timer(timings.mesh);
         out.m_mesh = meshOf(*surface, settings.adaptivity);
         if (settings.meshTemperature && temperature && nearest) {
             auto& t = out.m_mesh.temperature;
@@ -359,16 +426,17 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSet
 }
 
 double estimateSurfaceBytes(const ParticleSet& fluid, Real r, const SurfaceSettings& settings) {
-    // The largest grid: for anisotropic kernels the kernel sum over the fluid's whole volume (twice it, for the
-    // support around it); otherwise the narrow band, 2 x 3 voxels deep over the fluid's surface, taken as four
-    // times a cube's of the same volume (splashes and sheets have more surface). 8 bytes a voxel cover the value
-    // and the tree; 200 bytes a particle the cache and the per-particle kernels.
+    // Calibrated on surface_bench's puddles (200k and 1M particles, docs/benchmarks.md), where the measured peak
+    // was 60-75 bytes per voxel of the final band (the band, its smoothing's copies, the mesh) plus, for
+    // anisotropic kernels, about 4.5 bytes per voxel of the kernel sum over the fluid's volume and its support.
+    // The band is taken as twice that of a cube of the fluid's volume (splashes and sheets have more surface
+    // than a compact puddle, where this overestimates the band 1.25x); 200 bytes a particle cover the cache and
+    // the per-particle kernels. Every estimate was above the measured peak (1.6-2.3x).
     const Real voxel = settings.voxelFraction * r;
     const Real volume = Real(fluid.size()) * 8 * r * r * r;
-    const Real voxels = settings.method == SurfaceMethod::Anisotropic
-                            ? 2 * volume / (voxel * voxel * voxel)
-                            : 4 * 6 * std::pow(volume, 2.0 / 3.0) * 2 * kHalfBand / (voxel * voxel);
-    return 8 * voxels + 200.0 * double(fluid.size());
+    const Real bandVoxels = 2 * 6 * std::pow(volume, 2.0 / 3.0) * 2 * kHalfBand / (voxel * voxel);
+    const Real fieldVoxels = settings.method == SurfaceMethod::Anisotropic ? 2 * volume / (voxel * voxel * voxel) : 0;
+    return 80 * bandVoxels + 5 * fieldVoxels + 200.0 * double(fluid.size());
 }
 
 Real SurfaceMesh::volume() const {

@@ -3,8 +3,9 @@
 // OpenVDB stays behind this header: only the surfacer's own .cpp files include it.
 //
 // Three ways to turn particles into a level set (scene key surface.method):
-//  - spheres: a sphere of 1.75 r around every particle (OpenVDB ParticlesToLevelSet), moved inward by 0.54 r so
-//    that a flat lattice surface sits, on average, r above its top particles (where the lattice cells end);
+//  - spheres: a sphere of 2.5 r around every particle (OpenVDB ParticlesToLevelSet), large enough to leave no
+//    bubble between disordered particles, then moved inward by 1.36 r so that a flat layer's surface sits about
+//    r above its top particles (where the lattice cells end);
 //  - smooth_spheres: Zhu & Bridson 2005 (OpenVDB's point rasterisation): distance to the weighted average of the
 //    neighbours, which fills the dips between spheres;
 //  - anisotropic: Yu & Turk 2013: each particle's kernel (support 4 r) stretched along its neighbours' spread
@@ -36,6 +37,15 @@ struct SurfaceMesh {
     std::pair<std::size_t, std::size_t> openAndNonManifoldEdges() const;
 };
 
+/// Wall time of each part of surfacing one frame [s].
+struct SurfaceTimings {
+    double levelSet = 0;    ///< particles to level set (for anisotropic: kernels, kernel sum, rebuild)
+    double smoothing = 0;   ///< mean-curvature filter
+    double grids = 0;       ///< extra grids (density, temperature, vel)
+    double mesh = 0;        ///< meshing, normals, per-vertex temperatures
+    double total() const { return levelSet + smoothing + grids + mesh; }
+};
+
 /// The surface of one frame: the level set (grid `surface`), optional extra grids, and the mesh.
 class FrameSurface {
 public:
@@ -50,6 +60,7 @@ public:
     Real signedDistance(const Vec3& p) const;
     const SurfaceMesh& mesh() const { return m_mesh; }
     SurfaceMesh& mesh() { return m_mesh; }
+    const SurfaceTimings& timings() const { return m_timings; }
 
     /// Writes every grid to one .vdb file, atomically (a temporary file renamed into place).
     void writeVdb(const std::filesystem::path& path, const std::string& sceneName, std::int64_t frame) const;
@@ -59,6 +70,7 @@ private:
     struct Grids;
     std::unique_ptr<Grids> m_grids;
     SurfaceMesh m_mesh;
+    SurfaceTimings m_timings;
 };
 
 /// Surfaces the particles (radius r of the run) as the settings ask: level set, extra grids, mesh. An empty set
