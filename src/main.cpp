@@ -50,8 +50,13 @@ int main(int argc, char** argv) {
         subs.push_back(app.add_subcommand(c.name, c.help));
         addRunArgs(subs.back());
     }
-    for (std::size_t i : {std::size_t(0), std::size_t(3)})
+    for (std::size_t i : {std::size_t(0), std::size_t(3)}) {
         subs[i]->add_flag("--force", opt.force, "redo surface frames whose outputs are newer than their particle caches");
+        subs[i]->add_option("--memory", opt.memoryGiB,
+                            "GiB the surface stage may plan for (default: what the machine, or its cgroup, has "
+                            "free); frames run in parallel as far as it allows")
+            ->check(CLI::PositiveNumber);
+    }
     bool check = false;
     subs[1]->add_flag("--check", check,
                       "print a pre-flight report of every mesh (closed or not, bad edges and faces, bounds, the "

@@ -135,15 +135,19 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
                              s.warningCount ? fmt::format(", {} warnings", s.warningCount) : std::string());
 }
 
-// Memory the machine can still give (MemAvailable), or infinity when it cannot be read.
+// Memory this process can still get: the machine's MemAvailable, or less when a cgroup (v2: a farm's container
+// or job slot) caps it; infinity when neither can be read.
 double availableBytes() {
-    std::ifstream in("/proc/meminfo");
-    std::string key;
+    double free = std::numeric_limits<double>::infinity();
+    std::ifstream meminfo("/proc/meminfo");
+    std::string key, unit;
     double kib = 0;
-    std::string unit;
-    while (in >> key >> kib >> unit)
-        if (key == "MemAvailable:") return kib * 1024;
-    return std::numeric_limits<double>::infinity();
+    while (meminfo >> key >> kib >> unit)
+        if (key == "MemAvailable:") free = kib * 1024;
+    double limit = 0, used = 0;
+    std::ifstream max("/sys/fs/cgroup/memory.max"), current("/sys/fs/cgroup/memory.current");
+    if (max >> limit && current >> used) free = std::min(free, std::max(0.0, limit - used));  // "max": no limit
+    return free;
 }
 
 // An output is up to date when it exists and is newer than its input.
@@ -155,7 +159,7 @@ bool upToDate(const std::filesystem::path& output, const std::filesystem::path& 
 }
 
 void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
-                bool force, int threads, RunReport& report) {
+                bool force, int threads, double memoryGiB, RunReport& report) {
     StageRecord& stage = report.addStage("surface");
     const SurfaceSettings& settings = scene.surface;
     if (!settings.requested) {
@@ -199,15 +203,17 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
         // The batch's first frame sizes the batch, and is then surfaced from this same read.
         std::optional<CacheContents> first = readFrame(todo[start]);
         const double need = estimateSurfaceBytes(first->fluid, scene.particleRadius, settings);
-        const double have = availableBytes();
-        if (need > 0.8 * have)
+        // What frames may use: as much as --memory says, or 80 % of what is free (the rest for everything else).
+        const double budget = memoryGiB > 0 ? memoryGiB * (1 << 30) : 0.8 * availableBytes();
+        if (need > budget)
             throw SceneError(settings.at,
-                             fmt::format("surfacing frame {} ({} particles) at a voxel of {} x the particle radius "
-                                         "needs about {:.1f} GiB, more than the {:.1f} GiB this machine has free",
-                                         todo[start], first->fluid.size(), formatNumber(settings.voxelFraction),
-                                         need / (1 << 30), have / (1 << 30)),
-                             "raise surface.voxel_size, or surface fewer frames at once on a bigger machine");
-        batch = std::size_t(std::clamp<double>(std::floor(0.8 * have / need), 1, threads));
+                             fmt::format("surfacing frame {} ({}, {} particles) at a voxel of {} x the particle "
+                                         "radius needs about {:.2f} GiB, more than the {:.2f} GiB {}",
+                                         todo[start], layout.particles(todo[start]).string(), first->fluid.size(),
+                                         formatNumber(settings.voxelFraction), need / (1 << 30), budget / (1 << 30),
+                                         memoryGiB > 0 ? "--memory allows" : "it may use of what is free"),
+                             "raise surface.voxel_size, or surface on a machine with more free memory");
+        batch = std::size_t(std::clamp<double>(std::floor(budget / need), 1, threads));
         const std::size_t end = std::min(todo.size(), start + batch);
         tbb::parallel_for(std::size_t(start), end, [&](std::size_t k) {
             const std::int64_t f = todo[k];
@@ -327,7 +333,7 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
                 throw InputError(fmt::format("ganache surface: scene '{}' ({}) has no `surface:` section\n  fix: add "
                                              "`surface: {{}}` for the defaults (see scenes/README.md)",
                                              scene.name, scene.file.string()));
-            runSurface(scene, layout, frames, options.force, threads, report);
+            runSurface(scene, layout, frames, options.force, threads, options.memoryGiB, report);
         }
     }
     report.write(layout.report());

@@ -23,6 +23,7 @@ struct RunOptions {
     std::string quality = "preview";
     bool resume = false;
     bool force = false;                              ///< redo frames whose outputs are up to date
+    double memoryGiB = 0;                            ///< memory a stage may plan for; 0: what is free
 };
 
 /// The inclusive frame range "A-B" (or "A") within the scene's frames; InputError when malformed or outside.

@@ -175,6 +175,14 @@ TEST(Cli, SurfaceSkipsUpToDateFramesAndNamesBadOnes) {
     EXPECT_EQ(r.code, 0) << r.output;
     EXPECT_NE(r.output.find("2 frames surfaced"), std::string::npos) << r.output;
 
+    // A frame needing more memory than allowed is refused before any work, naming the frame and its cache.
+    r = runGanache("surface " + kTiny + " --frames 2-3 --force --memory 0.0001 --out " + out.string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find("surfacing frame 2 (" + (out / "particles/tiny.0002.vdb").string()), std::string::npos)
+        << r.output;
+    EXPECT_NE(r.output.find("--memory allows"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("fix: raise surface.voxel_size"), std::string::npos) << r.output;
+
     // A damaged cache: the error names the frame and the file; frames already surfaced stay as they were.
     const auto before = fs::last_write_time(out / "mesh/tiny.0001.obj");
     std::ofstream(out / "particles/tiny.0003.vdb") << "not a cache";
