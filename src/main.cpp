@@ -50,8 +50,10 @@ int main(int argc, char** argv) {
         subs.push_back(app.add_subcommand(c.name, c.help));
         addRunArgs(subs.back());
     }
+    for (std::size_t i : {std::size_t(0), std::size_t(3), std::size_t(4)})
+        subs[i]->add_flag("--force", opt.force,
+                          "redo surface and render frames whose outputs are newer than their inputs");
     for (std::size_t i : {std::size_t(0), std::size_t(3)}) {
-        subs[i]->add_flag("--force", opt.force, "redo surface frames whose outputs are newer than their particle caches");
         subs[i]->add_option("--memory", opt.memoryGiB,
                             "GiB the surface stage may plan for (default: what the machine, or its cgroup, has "
                             "free); frames run in parallel as far as it allows")

@@ -34,6 +34,7 @@ struct Material {
     Real conductivity = 0.6;     ///< thermal conductivity k [W/(m K)]
     Real heatCapacity = 4180;    ///< specific heat capacity c [J/(kg K)]
     std::optional<ViscosityLaw> law;  ///< temperature-dependent viscosity; mu is used where no temperature exists
+    Vec3 colour = Vec3(0.6, 0.75, 0.9);  ///< preview colour, sRGB in [0, 1]
 };
 
 /// The built-in presets: water, honey, molten_chocolate, solid_chocolate, chocolate (melting).

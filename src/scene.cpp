@@ -96,6 +96,9 @@ std::vector<Material> readMaterials(std::optional<Section> section) {
         mat.conductivity = m.number("conductivity", mat.conductivity, "W/(m K)", Bounds::nonNegative());
         mat.heatCapacity = m.positive("heat_capacity", mat.heatCapacity, "J/(kg K)");
         if (auto law = m.child("viscosity_law")) mat.law = readViscosityLaw(*law);
+        mat.colour = m.vec3("colour", mat.colour, "sRGB");
+        if (mat.colour.minCoeff() < 0 || mat.colour.maxCoeff() > 1)
+            m.fail("colour", "a colour's components lie in [0, 1] (sRGB)", "write e.g. `colour: [0.32, 0.17, 0.09]`");
         mat.source = "user material based on " + base;
         m.rejectUnused();
         out.push_back(mat);
@@ -490,7 +493,81 @@ SurfaceSettings readSurface(Section s, const Scene& scene) {
     return out;
 }
 
+CameraKey readCameraKey(Section& c, std::int64_t frame) {
+    CameraKey k;
+    k.frame = frame;
+    k.position = c.vec3("position", std::nullopt, "m");
+    k.target = c.vec3("target", std::nullopt, "m");
+    k.fovDegrees = c.number("fov", k.fovDegrees, "degrees (vertical)", Bounds{1, 170, false, false});
+    if ((k.target - k.position).norm() < 1e-9)
+        c.fail("target", "the camera looks at its own position", "put the target away from the position");
+    return k;
+}
+
+RenderSettings readRender(Section s, const Scene& scene) {
+    RenderSettings out;
+    out.requested = true;
+    out.at = s.where();
+    // OSMesa draws up to 16384 pixels a side; past 8192 a preview is a mistake, not a preview.
+    out.width = s.integer("width", out.width, 16, 8192);
+    out.height = s.integer("height", out.height, 16, 8192);
+    if (s.isList("camera")) {
+        for (Section key : s.list("camera")) {
+            const std::int64_t frame = key.integer("frame", std::nullopt, scene.frames.start, scene.frames.end);
+            if (!out.camera.empty() && frame <= out.camera.back().frame)
+                key.fail("frame", "camera keys must come in increasing frame order", "sort the keys by frame");
+            out.camera.push_back(readCameraKey(key, frame));
+            key.rejectUnused();
+        }
+    } else if (auto camera = s.child("camera")) {
+        out.camera.push_back(readCameraKey(*camera, scene.frames.start));
+        camera->rejectUnused();
+    }
+    const std::string view = s.choice("view", "auto", {"auto", "mesh", "particles"});
+    out.view = view == "mesh" ? RenderView::Mesh : view == "particles" ? RenderView::Particles : RenderView::Auto;
+    if (out.view == RenderView::Mesh && !(scene.surface.requested && scene.surface.mesh))
+        s.fail("view", "the mesh view needs surface meshes, and the scene asks for none",
+               "add a `surface:` section (with `mesh: true`), or use `view: auto`");
+    const std::vector<ColourBy> colourings{ColourBy::Velocity, ColourBy::Temperature, ColourBy::Viscosity};
+    std::vector<std::string> names;
+    for (ColourBy c : colourings) names.push_back(colourByName(c));
+    const std::string colourBy = s.choice("colour_by", names.front(), names);
+    out.colourBy = colourings[std::size_t(std::find(names.begin(), names.end(), colourBy) - names.begin())];
+    if (out.colourBy == ColourBy::Viscosity && !scene.findEffect("viscosity"))
+        s.fail("colour_by", "colouring by viscosity needs the viscosity effect: without it the fluid has none",
+               "add `viscosity: {}` under effects, or colour by velocity");
+    if (out.colourBy == ColourBy::Temperature && !scene.findEffect("heat"))
+        s.fail("colour_by", "colouring by temperature needs the heat effect: without it particles carry none",
+               "add `heat: {}` under effects, or colour by velocity");
+    if (s.has("colour_min") || s.has("colour_max")) {
+        const char* unit = out.colourBy == ColourBy::Velocity ? "m/s" : out.colourBy == ColourBy::Temperature ? "C" : "Pa s";
+        const Real lo = s.number("colour_min", std::nullopt, unit), hi = s.number("colour_max", std::nullopt, unit);
+        if (!(hi > lo))
+            s.fail("colour_max", "the colour range's maximum must exceed its minimum", "raise colour_max above colour_min");
+        out.colourRange = std::make_pair(lo, hi);
+    }
+    if (s.has("fluid_colour")) {
+        out.fluidColour = s.vec3("fluid_colour", std::nullopt, "sRGB");
+        if (out.fluidColour->minCoeff() < 0 || out.fluidColour->maxCoeff() > 1)
+            s.fail("fluid_colour", "a colour's components lie in [0, 1] (sRGB)", "write e.g. `fluid_colour: [0.86, 0.55, 0.12]`");
+    }
+    out.ground = s.boolean("ground", out.ground);
+    out.contactSheet = s.integer("contact_sheet", out.contactSheet, 0, 100);
+    out.video = s.boolean("video", out.video);
+    s.rejectUnused();
+    return out;
+}
+
 }  // namespace
+
+const char* colourByName(ColourBy c) {
+    switch (c) {
+    case ColourBy::Velocity: return "velocity";
+    case ColourBy::Temperature: return "temperature";
+    case ColourBy::Viscosity: return "viscosity";
+    }
+    return "?";
+}
 
 Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     auto effective = std::make_shared<EffectiveScene>();
@@ -597,6 +674,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     }
     if (auto eff = root.child("effects")) scene.effects = readEffects(*eff);
     if (auto surface = root.child("surface")) scene.surface = readSurface(*surface, scene);
+    if (auto render = root.child("render")) scene.render = readRender(*render, scene);
     root.rejectUnused();
     for (const auto& e : scene.effects) e.params->check(scene, e.at);
 

@@ -187,6 +187,34 @@ struct SurfaceSettings {
     Location at;
 };
 
+/// The `render:` section: preview images (see render/render.h).
+enum class RenderView { Auto, Mesh, Particles };
+enum class ColourBy { Velocity, Temperature, Viscosity };
+
+/// Where the camera is on a frame; several keys are interpolated linearly between their frames.
+struct CameraKey {
+    std::int64_t frame = 0;
+    Vec3 position = Vec3::Zero(), target = Vec3::Zero();  ///< [m]
+    Real fovDegrees = 40;  ///< vertical field of view
+};
+
+struct RenderSettings {
+    bool requested = false;   ///< the scene has a `render:` section; without one the stage is not run
+    std::int64_t width = 1280, height = 720;  ///< pixels
+    std::vector<CameraKey> camera;           ///< frames increasing; empty: framed on the first frame's bounds
+    RenderView view = RenderView::Auto;      ///< auto: the surface mesh when the frame has one, else particles
+    ColourBy colourBy = ColourBy::Velocity;  ///< particle colours
+    std::optional<std::pair<Real, Real>> colourRange;  ///< colour_min, colour_max; none: each frame's own range
+    std::optional<Vec3> fluidColour;         ///< sRGB; none: the first source's material colour
+    bool ground = true;                      ///< a ground plane with the bodies' and fluid's shadows
+    std::int64_t contactSheet = 12;          ///< frames on preview/<scene>.sheet.png; 0: no sheet
+    bool video = true;                       ///< preview/<scene>.mp4 through ffmpeg, when it is installed
+    Location at;
+};
+
+/// The scene's name of a particle colouring: "velocity", "temperature" or "viscosity".
+const char* colourByName(ColourBy c);
+
 struct Scene {
     std::filesystem::path file;
     std::string name;  ///< output file prefix
@@ -215,6 +243,7 @@ struct Scene {
     std::int64_t viscosityCoupling = 3;
 
     SurfaceSettings surface;
+    RenderSettings render;
 
     std::shared_ptr<const EffectiveScene> effective;  ///< every value read, defaults included
 

@@ -25,7 +25,6 @@
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/parallel_reduce.h>
 
-#include <fstream>
 #include <map>
 #include <mutex>
 
@@ -455,34 +454,6 @@ std::pair<std::size_t, std::size_t> SurfaceMesh::openAndNonManifoldEdges() const
     std::size_t open = 0, nonManifold = 0;
     for (const auto& [edge, n] : uses) open += n == 1, nonManifold += n > 2;
     return {open, nonManifold};
-}
-
-void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const std::string& header) {
-    writeAtomically(path, [&](const std::filesystem::path& tmp) {
-        std::ofstream out(tmp);
-        out.precision(9);
-        std::size_t start = 0;
-        while (start < header.size()) {
-            const std::size_t end = header.find('\n', start);
-            out << "# " << header.substr(start, end - start) << '\n';
-            if (end == std::string::npos) break;
-            start = end + 1;
-        }
-        const bool withT = !mesh.temperature.empty();
-        for (const auto& p : mesh.points) out << "v " << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
-        for (const auto& n : mesh.normals) out << "vn " << n.x() << ' ' << n.y() << ' ' << n.z() << '\n';
-        if (withT)
-            for (float t : mesh.temperature) out << "vt " << t << " 0\n";
-        for (const auto& t : mesh.triangles) {
-            out << 'f';
-            for (std::uint32_t v : t) {
-                if (withT) out << ' ' << v + 1 << '/' << v + 1 << '/' << v + 1;
-                else out << ' ' << v + 1 << "//" << v + 1;
-            }
-            out << '\n';
-        }
-        if (!out.flush()) throw std::runtime_error("could not write the mesh (disk full?)");
-    });
 }
 
 }  // namespace ganache

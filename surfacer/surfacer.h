@@ -85,4 +85,8 @@ double estimateSurfaceBytes(const ParticleSet& fluid, Real particleRadius, const
 /// value every OBJ reader keeps. `header` goes in comment lines at the top.
 void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const std::string& header);
 
+/// Reads a triangle OBJ as writeObj writes it (normals and temperatures optional; normals from the faces when
+/// absent). InputError naming the file and line when it is missing or malformed.
+SurfaceMesh readObj(const std::filesystem::path& path);
+
 }  // namespace ganache

@@ -1,4 +1,5 @@
 #include "pipeline.h"
+#include "stages.h"
 
 #include "cache.h"
 #include "errors.h"
@@ -22,24 +23,6 @@
 namespace ganache {
 
 namespace {
-
-const char* stageName(StageId s) {
-    switch (s) {
-    case StageId::Sample: return "sample";
-    case StageId::Simulate: return "simulate";
-    case StageId::Surface: return "surface";
-    case StageId::Render: return "render";
-    }
-    return "?";
-}
-
-// Stages this build does not have yet, and the issue that brings each.
-const char* missingStageNote(StageId s) {
-    switch (s) {
-    case StageId::Render: return "the preview renderer is not part of this build yet (issue 7)";
-    default: return nullptr;
-    }
-}
 
 void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report) {
     StageRecord& stage = report.addStage("sample");
@@ -150,13 +133,6 @@ double availableBytes() {
     return free;
 }
 
-// An output is up to date when it exists and is newer than its input.
-bool upToDate(const std::filesystem::path& output, const std::filesystem::path& input) {
-    std::error_code ec;
-    const auto out = std::filesystem::last_write_time(output, ec);
-    if (ec) return false;
-    return out >= std::filesystem::last_write_time(input, ec) && !ec;
-}
 
 void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
                 bool force, int threads, double memoryGiB, RunReport& report) {
@@ -268,6 +244,17 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
 
 }  // namespace
 
+bool upToDate(const std::filesystem::path& output, const std::filesystem::path& input) {
+    std::error_code ec;
+    const auto out = std::filesystem::last_write_time(output, ec);
+    if (ec) return false;
+    return out >= std::filesystem::last_write_time(input, ec) && !ec;
+}
+
+std::filesystem::path OutputLayout::preview(std::int64_t frame) const {
+    return root / "preview" / fmt::format("{}.{:04}.png", name, frame);
+}
+
 std::filesystem::path OutputLayout::particles(std::int64_t frame) const {
     return root / "particles" / fmt::format("{}.{:04}.vdb", name, frame);
 }
@@ -311,36 +298,34 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
                               scene.name};
     RunReport report(scene, threads);
 
-    bool stopped = false;
     for (StageId id : stages) {
-        if (stopped) {
-            report.addStage(stageName(id)) = {stageName(id), "not run", 0, "an earlier stage is not available", {}};
-            continue;
-        }
-        if (const char* missing = missingStageNote(id)) {
-            report.addStage(stageName(id)) = {stageName(id), "not available", 0, missing, {}};
-            if (stages.size() == 1) {
-                report.write(layout.report());
-                throw std::runtime_error(fmt::format("ganache {}: {}", stageName(id), missing));
-            }
-            stopped = true;
-            continue;
-        }
-        if (id == StageId::Sample) runSample(scene, layout, report);
-        else if (id == StageId::Simulate) runSimulate(scene, layout, frames, report);
-        else {
-            if (stages.size() == 1 && !scene.surface.requested)
+        const bool alone = stages.size() == 1;
+        if (id == StageId::Sample) {
+            runSample(scene, layout, report);
+        } else if (id == StageId::Simulate) {
+            runSimulate(scene, layout, frames, report);
+        } else if (id == StageId::Surface) {
+            if (alone && !scene.surface.requested)
                 throw InputError(fmt::format("ganache surface: scene '{}' ({}) has no `surface:` section\n  fix: add "
                                              "`surface: {{}}` for the defaults (see scenes/README.md)",
                                              scene.name, scene.file.string()));
             runSurface(scene, layout, frames, options.force, threads, options.memoryGiB, report);
+        } else {
+            if (alone && !scene.render.requested)
+                throw InputError(fmt::format("ganache render: scene '{}' ({}) has no `render:` section\n  fix: add "
+                                             "`render: {{}}` for the defaults (see scenes/README.md)",
+                                             scene.name, scene.file.string()));
+            try {
+                runRender(scene, layout, frames, options.force, report);
+            } catch (const InputError&) {
+                report.write(layout.report());  // the frames that did render are in it
+                throw;
+            }
         }
     }
     report.write(layout.report());
     fmt::print(stderr, "{}", report.table());
     fmt::print(stderr, "outputs in {} (report: {})\n", layout.root.string(), layout.report().string());
-    if (stopped)
-        fmt::print(stderr, "stopped after the stages this build has; the rest are listed as 'not available'\n");
 }
 
 void meshCheckCommand(const RunOptions& options) {

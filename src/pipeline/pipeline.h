@@ -39,6 +39,9 @@ struct OutputLayout {
     std::filesystem::path particles(std::int64_t frame) const;
     std::filesystem::path surface(std::int64_t frame) const;  ///< <out>/surface/<name>.NNNN.vdb
     std::filesystem::path mesh(std::int64_t frame) const;     ///< <out>/mesh/<name>.NNNN.obj
+    std::filesystem::path preview(std::int64_t frame) const;  ///< <out>/preview/<name>.NNNN.png
+    std::filesystem::path sheet() const { return root / "preview" / (name + ".sheet.png"); }
+    std::filesystem::path video() const { return root / "preview" / (name + ".mp4"); }
     std::filesystem::path report() const { return root / "report.json"; }
 };
 

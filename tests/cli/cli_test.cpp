@@ -2,6 +2,9 @@
 
 #include "cache.h"
 
+#include "render.h"
+
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -65,7 +68,7 @@ TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
         EXPECT_TRUE(fs::exists(out / ("surface/tiny.000" + std::to_string(f) + ".vdb"))) << f;
         EXPECT_TRUE(fs::exists(out / ("mesh/tiny.000" + std::to_string(f) + ".obj"))) << f;
     }
-    EXPECT_NE(r.output.find("not available"), std::string::npos) << "the missing renderer is said, not faked";
+    for (int f = 1; f <= 5; ++f) EXPECT_TRUE(fs::exists(out / ("preview/tiny.000" + std::to_string(f) + ".png"))) << f;
 
     std::ifstream in(out / "report.json");
     const auto report = nlohmann::json::parse(in);
@@ -80,7 +83,7 @@ TEST(Cli, RunSamplesTheSceneAndReportsWhatItDid) {
     EXPECT_EQ(report["stages"][2]["name"], "surface");
     EXPECT_EQ(report["stages"][2]["status"], "done");
     EXPECT_EQ(report["stages"][3]["name"], "render");
-    EXPECT_EQ(report["stages"][3]["status"], "not available");
+    EXPECT_EQ(report["stages"][3]["status"], "done");
     EXPECT_EQ(report["effects_requested"][0], "gravity");
     EXPECT_EQ(report["effects_ran"], report["effects_requested"]);
     EXPECT_GT(report["steps"].get<int>(), 0);
@@ -152,11 +155,20 @@ TEST(Cli, FramesLimitWhatIsWritten) {
     EXPECT_FALSE(fs::exists(out / "particles/tiny.0005.vdb"));
 }
 
-TEST(Cli, MissingStagesSaySoAndFail) {
-    const fs::path out = freshDir("render");
-    const Result r = runGanache("render " + kTiny + " --out " + out.string());
-    EXPECT_EQ(r.code, 1);
-    EXPECT_NE(r.output.find("not part of this build"), std::string::npos) << r.output;
+TEST(Cli, RenderNamesWhatIsMissing) {
+    const fs::path out = freshDir("render_missing");
+    Result r = runGanache("render " + kTiny + " --out " + out.string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find("frame 1 has no particle cache"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(out / "preview"));
+
+    const fs::path plain = out / "plain.yaml";
+    std::ifstream tiny(kTiny);
+    std::string text((std::istreambuf_iterator<char>(tiny)), std::istreambuf_iterator<char>());
+    std::ofstream(plain) << text.substr(0, text.find("render:"));
+    r = runGanache("render " + plain.string() + " --out " + out.string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find("no `render:` section"), std::string::npos) << r.output;
 }
 
 TEST(Cli, SurfaceSkipsUpToDateFramesAndNamesBadOnes) {
@@ -201,6 +213,30 @@ TEST(Cli, SurfaceSkipsUpToDateFramesAndNamesBadOnes) {
     r = runGanache("surface " + plain.string() + " --out " + out.string());
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.output.find("no `surface:` section"), std::string::npos) << r.output;
+}
+
+TEST(Cli, RenderWritesPreviewsAndNamesBadMeshes) {
+    const fs::path out = freshDir("render");
+    ASSERT_EQ(runGanache("run " + kTiny + " --frames 1-3 --out " + out.string()).code, 0);
+    for (int f = 1; f <= 3; ++f) {
+        const ganache::Image image = ganache::readPng(out / fmt::format("preview/tiny.{:04}.png", f));
+        EXPECT_EQ(image.width, 320);
+        EXPECT_EQ(image.height, 180);
+    }
+    EXPECT_TRUE(fs::exists(out / "preview/tiny.sheet.png"));
+    Result r = runGanache("render " + kTiny + " --frames 1-3 --out " + out.string());
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("3 up to date, skipped"), std::string::npos) << r.output;
+
+    // A damaged mesh: its frame is named with the file and line; the other frames are still rendered.
+    std::ofstream(out / "mesh/tiny.0002.obj") << "v 0 0 0\nv 1 0 0\nf 1 2 3\n";
+    const auto before = fs::last_write_time(out / "preview/tiny.0003.png");
+    r = runGanache("render " + kTiny + " --frames 1-3 --force --out " + out.string());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_NE(r.output.find("render: frame 2: " + (out / "mesh/tiny.0002.obj").string() + ":3:"), std::string::npos)
+        << r.output;
+    EXPECT_NE(r.output.find("2 other frames were rendered"), std::string::npos) << r.output;
+    EXPECT_GT(fs::last_write_time(out / "preview/tiny.0003.png"), before);
 }
 
 TEST(Cli, BadInputExitsWithTwoAndSaysWhere) {
