@@ -111,9 +111,9 @@ float lit() {
     if (any(lessThan(p.xy, vec2(0.0))) || any(greaterThan(p.xy, vec2(1.0)))) return 1.0;
     float texel = 1.0 / float(textureSize(uShadow, 0).x);
     float sum = 0.0;
-    for (int i = -2; i <= 2; ++i)
-        for (int j = -2; j <= 2; ++j) sum += texture(uShadow, vec3(p.xy + vec2(i, j) * 1.5 * texel, p.z - 0.0015));
-    return sum / 25.0;
+    for (int i = -1; i <= 1; ++i)
+        for (int j = -1; j <= 1; ++j) sum += texture(uShadow, vec3(p.xy + vec2(i, j) * 2.0 * texel, p.z - 0.0015));
+    return sum / 9.0;
 }
 
 void main() {

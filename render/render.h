@@ -49,6 +49,10 @@ struct DrawMesh {
 DrawMesh flatMesh(const std::vector<Vec3>& vertices, const std::vector<std::array<std::uint32_t, 3>>& triangles,
                   const Vec3& colour);
 
+/// A UV sphere of `segments` quads around and segments / 2 from pole to pole (2 segments^2 / 2 triangles),
+/// with exact normals: the reference shape of the renderer's tests and benchmark.
+DrawMesh sphereMesh(const Vec3& centre, Real radius, int segments, const Vec3& colour);
+
 /// Particles drawn as shaded spheres of one radius, each with its own colour (sRGB).
 struct DrawPoints {
     std::vector<Vec3> x, colour;

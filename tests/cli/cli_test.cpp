@@ -26,8 +26,9 @@ struct Result {
     std::string output;  // stdout and stderr together
 };
 
-Result runGanache(const std::string& args) {
-    const std::string cmd = std::string(GANACHE_EXE) + " " + args + " 2>&1";
+// Runs ganache with these arguments; `environment` (e.g. "PATH=/x:$PATH") is put before the command.
+Result runGanache(const std::string& args, const std::string& environment = "") {
+    const std::string cmd = environment + " " + std::string(GANACHE_EXE) + " " + args + " 2>&1";
     FILE* pipe = popen(cmd.c_str(), "r");
     std::string out;
     std::array<char, 4096> buf;
@@ -155,6 +156,38 @@ TEST(Cli, FramesLimitWhatIsWritten) {
     EXPECT_FALSE(fs::exists(out / "particles/tiny.0005.vdb"));
 }
 
+TEST(Cli, RenderHandsItsFramesToFfmpeg) {
+    // A stand-in ffmpeg on the PATH records how it is called and writes the file it is asked for; a second one
+    // fails, which must leave no video and only a warning.
+    const fs::path out = freshDir("video"), bin = out / "bin";
+    fs::create_directories(bin);
+    ASSERT_EQ(runGanache("run " + kTiny + " --frames 1-3 --out " + out.string()).code, 0);
+    auto fake = [&](const std::string& body) {
+        std::ofstream(bin / "ffmpeg") << "#!/bin/sh\necho \"$@\" > " << (out / "ffmpeg_args").string() << "\n" << body;
+        fs::permissions(bin / "ffmpeg", fs::perms::owner_all);
+    };
+    fake("for last; do :; done\necho video > \"$last\"\n");
+    const std::string path = "PATH=" + bin.string() + ":$PATH";
+    Result r = runGanache("render " + kTiny + " --frames 1-3 --out " + out.string(), path);
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("MP4 written"), std::string::npos) << r.output;
+    EXPECT_TRUE(fs::exists(out / "preview/tiny.mp4"));
+    std::ifstream argsFile(out / "ffmpeg_args");
+    const std::string args((std::istreambuf_iterator<char>(argsFile)), std::istreambuf_iterator<char>());
+    EXPECT_NE(args.find("-framerate 10 -start_number 1 -i " + (out / "preview/tiny.%04d.png").string() +
+                        " -frames:v 3"),
+              std::string::npos)
+        << args;
+
+    fs::remove(out / "preview/tiny.mp4");
+    fake("exit 1\n");
+    r = runGanache("render " + kTiny + " --frames 1-3 --force --out " + out.string(), path);
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("ffmpeg failed"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(out / "preview/tiny.mp4"));
+    EXPECT_FALSE(fs::exists(out / "preview/tiny.mp4.part.mp4"));
+}
+
 TEST(Cli, RenderNamesWhatIsMissing) {
     const fs::path out = freshDir("render_missing");
     Result r = runGanache("render " + kTiny + " --out " + out.string());
@@ -237,6 +270,22 @@ TEST(Cli, RenderWritesPreviewsAndNamesBadMeshes) {
         << r.output;
     EXPECT_NE(r.output.find("2 other frames were rendered"), std::string::npos) << r.output;
     EXPECT_GT(fs::last_write_time(out / "preview/tiny.0003.png"), before);
+
+    // A camera inside the fluid is rendered, and warned about in the report.
+    const fs::path inside = out / "tiny.yaml";
+    std::ifstream tiny(kTiny);
+    std::string text((std::istreambuf_iterator<char>(tiny)), std::istreambuf_iterator<char>());
+    text = text.substr(0, text.find("render:")) +
+           "render: {width: 64, height: 36, view: particles, camera: {position: [0.06, 0.05, 0.06], target: [1, 0, 0]}}\n";
+    std::ofstream(inside) << text;
+    r = runGanache("render " + inside.string() + " --frames 1 --out " + out.string());
+    EXPECT_EQ(r.code, 0) << r.output;
+    std::ifstream in(out / "report.json");
+    const auto report = nlohmann::json::parse(in);
+    ASSERT_FALSE(report["warnings"].empty()) << report.dump();
+    EXPECT_NE(report["warnings"][0].get<std::string>().find("frame 1: the camera is inside the fluid's bounds"),
+              std::string::npos)
+        << report["warnings"];
 }
 
 TEST(Cli, BadInputExitsWithTwoAndSaysWhere) {

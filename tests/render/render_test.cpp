@@ -14,23 +14,8 @@ namespace {
 
 // A UV sphere fine enough that its polygon silhouette is within 0.01 % of the true sphere's area.
 DrawMesh sphere(const Vec3& centre, Real radius, const Vec3& colour) {
-    DrawMesh m;
-    m.colour = colour;
+    DrawMesh m = sphereMesh(centre, radius, 256, colour);
     m.gloss = 0;
-    const int nu = 256, nv = 128;
-    for (int j = 0; j <= nv; ++j)
-        for (int i = 0; i <= nu; ++i) {
-            const Real theta = M_PI * j / nv, phi = 2 * M_PI * i / nu;
-            const Vec3 n(std::sin(theta) * std::cos(phi), std::cos(theta), std::sin(theta) * std::sin(phi));
-            m.points.push_back(centre + radius * n);
-            m.normals.push_back(n);
-        }
-    for (int j = 0; j < nv; ++j)
-        for (int i = 0; i < nu; ++i) {
-            const auto a = std::uint32_t(j * (nu + 1) + i), b = a + 1, c = a + nu + 1, d = c + 1;
-            m.triangles.push_back({a, b, c});
-            m.triangles.push_back({b, d, c});
-        }
     return m;
 }
 
