@@ -41,9 +41,12 @@ int main(int argc, char** argv) {
         {"sample", "turn the scene's shapes into fluid and boundary particles (writes sample/<scene>.vdb)",
          {StageId::Sample}},
         {"simulate", "simulate from the sample, writing particles/<scene>.NNNN.vdb", {StageId::Simulate}},
-        {"surface", "turn particle caches into level sets and meshes (writes surface/<scene>.NNNN.vdb, mesh/<scene>.NNNN.obj)",
+        {"surface", "turn particle caches into level sets and meshes when the scene has a `surface:` section (writes "
+                    "surface/<scene>.NNNN.vdb, mesh/<scene>.NNNN.obj)",
          {StageId::Surface}},
-        {"render", "render preview images of the meshes or particles", {StageId::Render}},
+        {"render", "render previews of the meshes or particles when the scene has a `render:` section (writes "
+                   "preview/<scene>.NNNN.png, a contact sheet, an MP4 when ffmpeg is installed)",
+         {StageId::Render}},
     };
     std::vector<CLI::App*> subs;
     for (const auto& c : commands) {

@@ -7,7 +7,6 @@
 #include "errors.h"
 #include "progress.h"
 #include "render.h"
-#include "shapes.h"
 #include "surfacer.h"
 
 #include <fmt/format.h>
@@ -17,6 +16,7 @@
 #include <cstdlib>
 #include <mutex>
 #include <sys/wait.h>
+#include <unistd.h>
 
 namespace ganache {
 
