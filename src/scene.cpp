@@ -79,6 +79,14 @@ ViscosityLaw readViscosityLaw(Section s) {
     return law;
 }
 
+// An sRGB colour, each component in [0, 1].
+Vec3 readColour(Section& s, const std::string& key, std::optional<Vec3> fallback) {
+    const Vec3 c = s.vec3(key, fallback, "sRGB");
+    if (c.minCoeff() < 0 || c.maxCoeff() > 1)
+        s.fail(key, "a colour's components lie in [0, 1] (sRGB)", fmt::format("write e.g. `{}: [0.32, 0.17, 0.09]`", key));
+    return c;
+}
+
 // `materials:` maps a user's name to a preset it starts from and the values it changes.
 std::vector<Material> readMaterials(std::optional<Section> section) {
     std::vector<Material> out;
@@ -96,9 +104,7 @@ std::vector<Material> readMaterials(std::optional<Section> section) {
         mat.conductivity = m.number("conductivity", mat.conductivity, "W/(m K)", Bounds::nonNegative());
         mat.heatCapacity = m.positive("heat_capacity", mat.heatCapacity, "J/(kg K)");
         if (auto law = m.child("viscosity_law")) mat.law = readViscosityLaw(*law);
-        mat.colour = m.vec3("colour", mat.colour, "sRGB");
-        if (mat.colour.minCoeff() < 0 || mat.colour.maxCoeff() > 1)
-            m.fail("colour", "a colour's components lie in [0, 1] (sRGB)", "write e.g. `colour: [0.32, 0.17, 0.09]`");
+        mat.colour = readColour(m, "colour", mat.colour);
         mat.source = "user material based on " + base;
         m.rejectUnused();
         out.push_back(mat);
@@ -546,11 +552,7 @@ RenderSettings readRender(Section s, const Scene& scene) {
             s.fail("colour_max", "the colour range's maximum must exceed its minimum", "raise colour_max above colour_min");
         out.colourRange = std::make_pair(lo, hi);
     }
-    if (s.has("fluid_colour")) {
-        out.fluidColour = s.vec3("fluid_colour", std::nullopt, "sRGB");
-        if (out.fluidColour->minCoeff() < 0 || out.fluidColour->maxCoeff() > 1)
-            s.fail("fluid_colour", "a colour's components lie in [0, 1] (sRGB)", "write e.g. `fluid_colour: [0.86, 0.55, 0.12]`");
-    }
+    if (s.has("fluid_colour")) out.fluidColour = readColour(s, "fluid_colour", std::nullopt);
     out.ground = s.boolean("ground", out.ground);
     out.contactSheet = s.integer("contact_sheet", out.contactSheet, 0, 100);
     out.video = s.boolean("video", out.video);
