@@ -144,14 +144,7 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
         return;
     }
     Stopwatch clock;
-    // Every input first: a missing frame is reported before any work, naming what the simulation wrote.
-    for (std::int64_t f = frames.first; f <= frames.second; ++f)
-        if (!std::filesystem::exists(layout.particles(f)))
-            throw InputError(fmt::format("surface: frame {} has no particle cache ({})\n  fix: simulate frames {}-{} "
-                                         "first (`ganache simulate {} --frames {}-{}`), or pick frames that were "
-                                         "simulated with --frames",
-                                         f, layout.particles(f).string(), frames.first, frames.second,
-                                         scene.file.string(), frames.first, frames.second));
+    requireParticleCaches("surface", scene, layout, frames);
     std::vector<std::int64_t> todo;
     std::size_t skipped = 0;
     for (std::int64_t f = frames.first; f <= frames.second; ++f) {
@@ -249,6 +242,17 @@ bool upToDate(const std::filesystem::path& output, const std::filesystem::path& 
     const auto out = std::filesystem::last_write_time(output, ec);
     if (ec) return false;
     return out >= std::filesystem::last_write_time(input, ec) && !ec;
+}
+
+void requireParticleCaches(const char* stage, const Scene& scene, const OutputLayout& layout,
+                           std::pair<std::int64_t, std::int64_t> frames) {
+    for (std::int64_t f = frames.first; f <= frames.second; ++f)
+        if (!std::filesystem::exists(layout.particles(f)))
+            throw InputError(fmt::format("{}: frame {} has no particle cache ({})\n  fix: simulate frames {}-{} "
+                                         "first (`ganache simulate {} --frames {}-{}`), or pick frames that were "
+                                         "simulated with --frames",
+                                         stage, f, layout.particles(f).string(), frames.first, frames.second,
+                                         scene.file.string(), frames.first, frames.second));
 }
 
 std::filesystem::path OutputLayout::preview(std::int64_t frame) const {

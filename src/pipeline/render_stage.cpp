@@ -141,12 +141,7 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         return;
     }
     Stopwatch clock;
-    for (std::int64_t f = frames.first; f <= frames.second; ++f)
-        if (!std::filesystem::exists(layout.particles(f)))
-            throw InputError(fmt::format("render: frame {} has no particle cache ({})\n  fix: simulate frames {}-{} "
-                                         "first (`ganache simulate {} --frames {}-{}`)",
-                                         f, layout.particles(f).string(), frames.first, frames.second,
-                                         scene.file.string(), frames.first, frames.second));
+    requireParticleCaches("render", scene, layout, frames);
     const bool meshesExist = scene.surface.requested && scene.surface.mesh;
     auto usesMesh = [&](std::int64_t f) {
         return settings.view == RenderView::Mesh ||

@@ -46,6 +46,14 @@ fs::path freshDir(const std::string& name) {
 
 const std::string kTiny = (kSource / "tests/scenes/tiny.yaml").string();
 
+// Writes the tiny scene to `file`, cut before the line that starts with `cutAt` (dropping that section and what
+// follows it), then `extra`.
+void writeTinyVariant(const fs::path& file, const std::string& cutAt, const std::string& extra = "") {
+    std::ifstream tiny(kTiny);
+    const std::string text((std::istreambuf_iterator<char>(tiny)), std::istreambuf_iterator<char>());
+    std::ofstream(file) << text.substr(0, text.find(cutAt)) << extra;
+}
+
 }  // namespace
 
 TEST(Cli, HelpForEveryCommand) {
@@ -196,9 +204,7 @@ TEST(Cli, RenderNamesWhatIsMissing) {
     EXPECT_FALSE(fs::exists(out / "preview"));
 
     const fs::path plain = out / "plain.yaml";
-    std::ifstream tiny(kTiny);
-    std::string text((std::istreambuf_iterator<char>(tiny)), std::istreambuf_iterator<char>());
-    std::ofstream(plain) << text.substr(0, text.find("render:"));
+    writeTinyVariant(plain, "render:");
     r = runGanache("render " + plain.string() + " --out " + out.string());
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.output.find("no `render:` section"), std::string::npos) << r.output;
@@ -240,9 +246,7 @@ TEST(Cli, SurfaceSkipsUpToDateFramesAndNamesBadOnes) {
 
     // A scene that asks for no surface: `run` skips the stage, `surface` says what to add.
     const fs::path plain = freshDir("no_surface") / "plain.yaml";
-    std::ifstream tiny(kTiny);
-    std::string text((std::istreambuf_iterator<char>(tiny)), std::istreambuf_iterator<char>());
-    std::ofstream(plain) << text.substr(0, text.find("surface:"));
+    writeTinyVariant(plain, "surface:");
     r = runGanache("surface " + plain.string() + " --out " + out.string());
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.output.find("no `surface:` section"), std::string::npos) << r.output;
@@ -273,11 +277,9 @@ TEST(Cli, RenderWritesPreviewsAndNamesBadMeshes) {
 
     // A camera inside the fluid is rendered, and warned about in the report.
     const fs::path inside = out / "tiny.yaml";
-    std::ifstream tiny(kTiny);
-    std::string text((std::istreambuf_iterator<char>(tiny)), std::istreambuf_iterator<char>());
-    text = text.substr(0, text.find("render:")) +
-           "render: {width: 64, height: 36, view: particles, camera: {position: [0.06, 0.05, 0.06], target: [1, 0, 0]}}\n";
-    std::ofstream(inside) << text;
+    writeTinyVariant(inside, "render:",
+                     "render: {width: 64, height: 36, view: particles, camera: {position: [0.06, 0.05, 0.06], "
+                     "target: [1, 0, 0]}}\n");
     r = runGanache("render " + inside.string() + " --frames 1 --out " + out.string());
     EXPECT_EQ(r.code, 0) << r.output;
     std::ifstream in(out / "report.json");
