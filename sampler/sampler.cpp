@@ -330,6 +330,14 @@ Sample sampleScene(const Scene& scene, const SampleCache* cache) {
             restDensity.push_back(spec.material.density);
             ++count;
         }
+        if (spec.angularVelocity.squaredNorm() > 0 && count > 0) {  // spin about this fluid's centre of mass
+            const std::size_t first = out.fluid.size() - count;
+            Vec3 centre = Vec3::Zero();
+            for (std::size_t i = first; i < out.fluid.size(); ++i) centre += out.fluid.x()[i];
+            centre /= Real(count);
+            for (std::size_t i = first; i < out.fluid.size(); ++i)
+                out.fluid.v()[i] += spec.angularVelocity.cross(out.fluid.x()[i] - centre);
+        }
         out.carvedByBoundaries += byBoundaries;
         out.fluidCounts.push_back(count);
         out.fluidSites.push_back(sites.size());

@@ -213,6 +213,7 @@ FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& c
     f.name = s.name("name", fmt::format("fluid{}", index));
     f.material = findMaterial(s, custom);
     f.velocity = s.vec3("velocity", f.velocity, "m/s");
+    f.angularVelocity = s.vec3("angular_velocity", f.angularVelocity, "rad/s");
     f.jitter = s.number("jitter", f.jitter, "x lattice spacing", Bounds::closed(0, 0.25));
     f.temperature = s.number("temperature", f.temperature, "C (used with the heat effect)", Bounds{-273.15, 1e4});
     const std::string shape = pickShape(s, {"box", "sphere", "mesh"});

@@ -73,6 +73,7 @@ struct FluidSpec {
     std::string name;
     Material material;
     Vec3 velocity = Vec3::Zero();  ///< initial velocity [m/s]
+    Vec3 angularVelocity = Vec3::Zero();  ///< initial spin about the fluid's centre of mass [rad/s]
     FluidShape shape;
     Real jitter = 0;               ///< random offset of each lattice site, as a fraction of the spacing
     Real temperature = 20;         ///< initial temperature [C], used with the heat effect

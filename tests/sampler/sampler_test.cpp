@@ -128,3 +128,20 @@ TEST(Sampler, LatticeMassMatchesRestDensity) {
     // Close to rho0 d^3 (the kernel's lattice sum is near 1 / d^3) but not equal: that is why it is computed.
     EXPECT_NEAR(m / (1000 * std::pow(0.02, 3)), 1.0, 0.1);
 }
+
+TEST(Sampler, AngularVelocitySpinsTheFluidAboutItsCentreOfMass) {
+    // The rotating cube's start (the paper's Fig. 5): v = v0 + omega x (x - c), c the fluid's centre of mass, so
+    // the linear momentum is v0's alone and every particle moves rigidly.
+    const Scene s = sceneFrom("spin", R"(particles: {radius: 0.01}
+domain: {min: [-1, -1, -1], max: [1, 1, 1]}
+fluids: [{box: {min: [0.1, 0, 0], max: [0.3, 0.2, 0.2]}, velocity: [0, 1, 0], angular_velocity: [0, 0, 5]}]
+)");
+    const Sample out = sampleScene(s);
+    Vec3 centre = Vec3::Zero(), momentum = Vec3::Zero();
+    for (std::size_t i = 0; i < out.fluid.size(); ++i) centre += out.fluid.x()[i], momentum += out.fluid.v()[i];
+    centre /= Real(out.fluid.size());
+    EXPECT_NEAR((centre - Vec3(0.2, 0.1, 0.1)).norm(), 0, 1e-12);
+    EXPECT_NEAR((momentum / Real(out.fluid.size()) - Vec3(0, 1, 0)).norm(), 0, 1e-12);
+    for (std::size_t i = 0; i < out.fluid.size(); ++i)
+        EXPECT_NEAR((out.fluid.v()[i] - Vec3(0, 1, 0) - Vec3(0, 0, 5).cross(out.fluid.x()[i] - centre)).norm(), 0, 1e-12);
+}
