@@ -11,6 +11,7 @@
 
 #include <Eigen/Geometry>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -339,16 +340,19 @@ Image Renderer::render(const FrameView& view) {
     const Vec3f centre = toFloat(0.5 * (lo + hi));
     const float radius = std::max(1e-3f, float(0.5 * (hi - lo).norm()) + float(pointRadius));
 
-    // Ground: a square around the scene, fading into the sky.
+    // Ground: a square around the camera's target, fading into the sky. Its size follows the camera, not what is
+    // drawn, so that a sequence with a fixed camera keeps the same horizon while the fluid moves and grows.
     Batch ground;
     float groundFade = 0;
+    const Vec3f groundCentre = toFloat(view.camera.target);
     if (view.groundHeight) {
-        const float y = float(*view.groundHeight), size = 12 * radius;
+        const float y = float(*view.groundHeight);
+        const float size = 4 * float((view.camera.position - view.camera.target).norm());
         groundFade = 0.8f * size;
         const Vec3 up = Vec3::UnitY(), tint = Vec3::Constant(std::pow(kGroundAlbedo, 1 / 2.2));
         for (int k = 0; k < 4; ++k) {
             const float sx = (k == 1 || k == 2) ? 1.f : -1.f, sz = k >= 2 ? 1.f : -1.f;
-            ground.add(Vec3(centre.x() + sx * size, y, centre.z() + sz * size), up, tint);
+            ground.add(Vec3(groundCentre.x() + sx * size, y, groundCentre.z() + sz * size), up, tint);
         }
         ground.indices = {0, 2, 1, 0, 3, 2};
     }
@@ -358,7 +362,7 @@ Image Renderer::render(const FrameView& view) {
     const float aspect = float(g.width) / float(g.height);
     const float fov = float(view.camera.fovDegrees * M_PI / 180);
     const float distance = (eye - centre).norm();
-    const float farZ = std::max(distance + 30 * radius, 1.0f);
+    const float farZ = std::max({distance + 30 * radius, 6 * (eye - target).norm(), 1.0f});  // the ground too
     const float nearZ = std::max(farZ * 1e-5f, std::max(1e-4f, distance - 2 * radius) * 0.05f);
     const Mat4f viewMatrix = lookAt(eye, target, Vec3f::UnitY());
     const Mat4f viewProj = perspective(fov, aspect, nearZ, farZ) * viewMatrix;
@@ -411,7 +415,7 @@ Image Renderer::render(const FrameView& view) {
     glUniform3fv(uniform("uEye"), 1, eye.data());
     glUniform3fv(uniform("uKey"), 1, kKeyDirection.data());
     glUniform3fv(uniform("uFill"), 1, kFillDirection.data());
-    glUniform3fv(uniform("uGroundCentre"), 1, centre.data());
+    glUniform3fv(uniform("uGroundCentre"), 1, groundCentre.data());
     glUniform1f(uniform("uGroundFade"), groundFade);
     glUniform2f(uniform("uViewport"), float(g.width), float(g.height));
     glUniform3fv(uniform("uSkyBottom"), 1, skyBottom.data());
