@@ -133,7 +133,6 @@ double availableBytes() {
     return free;
 }
 
-
 void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
                 bool force, int threads, double memoryGiB, RunReport& report) {
     StageRecord& stage = report.addStage("surface");
@@ -302,23 +301,23 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
                               scene.name};
     RunReport report(scene, threads);
 
+    // A stage run on its own must be asked for by the scene (`run` skips it quietly instead).
+    auto requireSection = [&](const char* section, bool requested) {
+        if (stages.size() == 1 && !requested)
+            throw InputError(fmt::format("ganache {0}: scene '{1}' ({2}) has no `{0}:` section\n  fix: add `{0}: {{}}` "
+                                         "for the defaults (see scenes/README.md)",
+                                         section, scene.name, scene.file.string()));
+    };
     for (StageId id : stages) {
-        const bool alone = stages.size() == 1;
         if (id == StageId::Sample) {
             runSample(scene, layout, report);
         } else if (id == StageId::Simulate) {
             runSimulate(scene, layout, frames, report);
         } else if (id == StageId::Surface) {
-            if (alone && !scene.surface.requested)
-                throw InputError(fmt::format("ganache surface: scene '{}' ({}) has no `surface:` section\n  fix: add "
-                                             "`surface: {{}}` for the defaults (see scenes/README.md)",
-                                             scene.name, scene.file.string()));
+            requireSection("surface", scene.surface.requested);
             runSurface(scene, layout, frames, options.force, threads, options.memoryGiB, report);
         } else {
-            if (alone && !scene.render.requested)
-                throw InputError(fmt::format("ganache render: scene '{}' ({}) has no `render:` section\n  fix: add "
-                                             "`render: {{}}` for the defaults (see scenes/README.md)",
-                                             scene.name, scene.file.string()));
+            requireSection("render", scene.render.requested);
             try {
                 runRender(scene, layout, frames, options.force, report);
             } catch (const InputError&) {

@@ -159,7 +159,7 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
     // The camera: the scene's, or framed once on the scene's first frame (the same for every frame).
     std::vector<CameraKey> keys = settings.camera;
     std::optional<Real> ground;
-    {
+    if (!todo.empty()) {
         const std::int64_t first = std::filesystem::exists(layout.particles(scene.frames.start)) ? scene.frames.start
                                                                                                   : frames.first;
         const CacheContents cache = readParticleCache(layout.particles(first));
@@ -204,11 +204,11 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
                     throw InputError(fmt::format("{}: no surface mesh for this frame\n  fix: run `ganache surface {} "
                                                  "--frames {}`, or render with `view: auto`",
                                                  layout.mesh(f).string(), scene.file.string(), f));
-                const SurfaceMesh surface = readObj(layout.mesh(f));
+                SurfaceMesh surface = readObj(layout.mesh(f));
                 DrawMesh m;
-                m.points = surface.points;
-                m.normals = surface.normals;
-                m.triangles = surface.triangles;
+                m.points = std::move(surface.points);
+                m.normals = std::move(surface.normals);
+                m.triangles = std::move(surface.triangles);
                 m.colour = fluidColour;
                 m.gloss = 0.6;
                 grow(lo, hi, m.points);
@@ -256,10 +256,11 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         if (std::filesystem::exists(layout.preview(f))) stage.outputs.push_back(layout.preview(f).string());
     }
 
-    // The contact sheet: up to contact_sheet frames spread evenly over the range.
+    // The contact sheet and the video, made again only when a frame was rendered (or they are missing).
     std::string sheetNote, videoNote;
     const std::int64_t count = frames.second - frames.first + 1;
-    if (settings.contactSheet > 0) {
+    if (settings.contactSheet > 0 && (done > 0 || !std::filesystem::exists(layout.sheet()))) {
+        // Up to contact_sheet frames spread evenly over the range.
         std::vector<Image> images;
         std::vector<std::string> captions;
         const std::int64_t n = std::min<std::int64_t>(settings.contactSheet, count);
@@ -276,7 +277,7 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         }
     }
     // The video, from every frame of the range, when ffmpeg is there.
-    if (settings.video && failures.empty()) {
+    if (settings.video && failures.empty() && (done > 0 || !std::filesystem::exists(layout.video()))) {
         if (!onPath("ffmpeg")) {
             videoNote = "; no MP4: ffmpeg is not installed (`apt-get install ffmpeg`)";
         } else {

@@ -261,9 +261,11 @@ TEST(Cli, RenderWritesPreviewsAndNamesBadMeshes) {
         EXPECT_EQ(image.height, 180);
     }
     EXPECT_TRUE(fs::exists(out / "preview/tiny.sheet.png"));
+    const auto sheetTime = fs::last_write_time(out / "preview/tiny.sheet.png");
     Result r = runGanache("render " + kTiny + " --frames 1-3 --out " + out.string());
     EXPECT_EQ(r.code, 0) << r.output;
     EXPECT_NE(r.output.find("3 up to date, skipped"), std::string::npos) << r.output;
+    EXPECT_EQ(fs::last_write_time(out / "preview/tiny.sheet.png"), sheetTime) << "nothing new: the sheet is kept";
 
     // A damaged mesh: its frame is named with the file and line; the other frames are still rendered.
     std::ofstream(out / "mesh/tiny.0002.obj") << "v 0 0 0\nv 1 0 0\nf 1 2 3\n";
