@@ -3,7 +3,7 @@
 #include "heat.h"
 #include "parallel.h"
 #include "step.h"
-#include "viscosity_weiler2018.h"
+#include "viscosity.h"
 
 #include <fmt/format.h>
 
@@ -35,15 +35,39 @@ std::unique_ptr<Effect> makeGravity(const EffectParams& p, const Scene&, Particl
 }
 
 std::shared_ptr<const EffectParams> readViscosity(Section& s) {
+    using Method = ViscosityParams::Method;
+    using Preconditioner = ViscosityParams::Preconditioner;
     auto p = std::make_shared<ViscosityParams>();
+    const std::string method = s.choice("method", "weiler2018", {"weiler2018", "explicit", "takahashi2015"});
+    p->method = method == "explicit" ? Method::Explicit : method == "takahashi2015" ? Method::Takahashi2015
+                                                                                     : Method::Weiler2018;
     if (s.has("mu")) p->mu = s.number("mu", std::nullopt, "Pa s", Bounds::nonNegative());
     p->boundaryMu = s.number("boundary_mu", p->boundaryMu, "Pa s", Bounds::nonNegative());
+    if (p->method == Method::Explicit) {
+        // Forward Euler has no solve: its only setting is how many sub-steps one step may take.
+        for (const char* key : {"tolerance", "preconditioner", "warm_start"})
+            if (s.has(key))
+                s.failAtKey(key, fmt::format("{}.{} is a setting of the implicit solvers; method 'explicit' has no "
+                                             "solve",
+                                             s.path(), key),
+                            "remove it, or choose method: weiler2018");
+        p->maxIterations = s.integer("max_iterations", 10000, 1, 100000000);
+        return p;
+    }
     p->tolerance = s.number("tolerance", p->tolerance, "relative residual", Bounds{0, 1, true, true});
     p->maxIterations = s.integer("max_iterations", p->maxIterations, 1, 100000);
-    const std::string preconditioner = s.choice("preconditioner", "rigid", {"rigid", "block_jacobi", "none"});
-    p->preconditioner = preconditioner == "none"           ? ViscosityParams::Preconditioner::None
-                        : preconditioner == "block_jacobi" ? ViscosityParams::Preconditioner::BlockJacobi
-                                                           : ViscosityParams::Preconditioner::Rigid;
+    const bool weiler = p->method == Method::Weiler2018;
+    const std::string preconditioner =
+        s.choice("preconditioner", weiler ? "rigid" : "block_jacobi", {"rigid", "block_jacobi", "none"});
+    if (preconditioner == "rigid" && !weiler)
+        s.fail("preconditioner",
+               fmt::format("{}.preconditioner 'rigid' works on the system of weiler2018 only: the rigid motions are "
+                           "not free of viscous forces in {}'s",
+                           s.path(), method),
+               "use block_jacobi or none");
+    p->preconditioner = preconditioner == "none"           ? Preconditioner::None
+                        : preconditioner == "block_jacobi" ? Preconditioner::BlockJacobi
+                                                           : Preconditioner::Rigid;
     p->warmStart = s.boolean("warm_start", p->warmStart);
     return p;
 }
@@ -59,8 +83,9 @@ std::vector<std::string> effectNames() {
 const std::vector<EffectEntry>& effectTable() {
     static const std::vector<EffectEntry> table = {
         {"gravity", Stage::Forces, "uniform acceleration of every fluid particle", &readGravity, &makeGravity},
-        {"viscosity", Stage::Viscosity, "implicit viscosity of Weiler et al. 2018", &readViscosity,
-         &makeViscosityWeiler2018},
+        {"viscosity", Stage::Viscosity,
+         "viscosity: the implicit solver of Weiler et al. 2018, or (for comparison) explicit or takahashi2015",
+         &readViscosity, &makeViscosity},
         {"heat", Stage::Heat, "temperature: conduction, radiation, heat sources; melting through viscosity laws",
          &readHeat, &makeHeat},
     };

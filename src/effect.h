@@ -30,16 +30,21 @@ struct GravityParams : EffectParams {
     Vec3 acceleration{0, -9.81, 0};
 };
 
-/// Implicit viscosity of Weiler et al. 2018 (settings of its conjugate-gradient solve).
+/// Viscosity: the method and the settings of its solve (see viscosity.h).
 struct ViscosityParams : EffectParams {
+    /// weiler2018: the implicit solver of Weiler et al. 2018 that ganache is built on; explicit and takahashi2015
+    /// are there to compare against it (ganache study).
+    enum class Method { Weiler2018, Explicit, Takahashi2015 };
+    Method method = Method::Weiler2018;
     std::optional<Real> mu;      ///< dynamic viscosity for every fluid [Pa s]; unset: each fluid's material
     Real boundaryMu = 0;         ///< boundary viscosity mu_b [Pa s]: 0 slips, large sticks
     /// CG stops when |r| <= tolerance |b - (I - dt A) v_df|, the residual relative to the correction the solve
     /// has to make. At 1e-3 the warm start's leftover added 2.4 % angular momentum to a spinning cube in 0.5 s;
     /// at 1e-4 it keeps it to 0.01 %.
     Real tolerance = 1e-4;
-    std::int64_t maxIterations = 100;
-    /// none, 3x3 block Jacobi, or block Jacobi plus the fluid's rigid motions as a coarse space (two-level)
+    std::int64_t maxIterations = 100;  ///< CG iterations per solve; explicit: sub-steps per step (default 10,000)
+    /// none, 3x3 block Jacobi, or block Jacobi plus the fluid's rigid motions as a coarse space (two-level;
+    /// weiler2018 only, its default; takahashi2015 defaults to block Jacobi)
     enum class Preconditioner { None, BlockJacobi, Rigid };
     Preconditioner preconditioner = Preconditioner::Rigid;
     bool warmStart = true;       ///< initial guess v_df + dv of the previous step (false: v_df)

@@ -2,7 +2,7 @@
 // Implicit viscosity of Weiler, Koschier, Brand, Bender 2018: "A Physically Consistent Implicit Viscosity
 // Solver for SPH Fluids", Computer Graphics Forum 37(2). [WKBB18]
 
-#include "step.h"
+#include "viscosity.h"
 
 namespace ganache {
 
@@ -38,44 +38,24 @@ private:
 
 /// Solves (I - dt A) v = b for the velocities after the divergence-free solve [WKBB18 Eq. 8-12] with
 /// matrix-free preconditioned conjugate gradients. Per pair, mass and viscosity are averaged, so the system is
-/// symmetric positive definite. Holds a per-particle viscosity only when the scene's fluids differ in it or melt
-/// (a material with a viscosity law in a scene with the heat effect).
-class ViscosityWeiler2018 final : public Effect {
+/// symmetric positive definite.
+class ViscosityWeiler2018 final : public ViscosityMethod {
 public:
-    ViscosityWeiler2018(const ViscosityParams& params, const Scene& scene, ParticleSet& particles);
-    void apply(StepContext& ctx, ParticleSet& particles) override;
+    ViscosityWeiler2018(const ViscosityParams& params, const Scene& scene, ParticleSet& particles)
+        : ViscosityMethod(params, scene, particles) {}
 
-    /// Iterations and relative residual of the last solve.
-    std::size_t lastIterations() const { return m_lastIterations; }
-    Real lastResidual() const { return m_lastResidual; }
+protected:
+    ViscosityPass solve(StepContext& ctx, const ParticleSet& particles, std::vector<Vec3>& out) override;
 
 private:
-    Real mu(std::size_t i) const { return m_muPerParticle ? (*m_muPerParticle)[i] : m_mu; }
-    Real pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
-                         const Vec3& xij) const;
-    Real boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k, const Vec3& xik) const;
-    void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, bool firstPass);
-    void refreshViscosity(const ParticleSet& particles);  // mu of each particle from its source and temperature
     void multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out) const;
 
-    ViscosityParams m_params;
-    Real m_mu = 0;
-    std::vector<Real>* m_muPerParticle = nullptr;  // attribute `viscosity`, only when viscosities differ
-    std::vector<Real> m_sourceMu;                  // mu of each fluid and emitter, when viscosity varies
-    std::vector<std::optional<ViscosityLaw>> m_sourceLaw;  // their laws over temperature, with the heat effect
-    std::vector<Vec3>* m_dv;                       // attribute `_viscosity_dv`: the last pass's change
-    std::vector<Vec3> m_b, m_x, m_r, m_z, m_p, m_q;
+    std::vector<Vec3> m_b;
+    ConjugateGradient m_cg;
     std::vector<Mat3> m_inverseDiagonal;
     std::vector<Mat3> m_boundaryBlock;  // -dt times the boundary part of each diagonal block, with boundary_mu > 0
     RigidModes m_rigid;
-    BodyLoads m_passLoads;  // the viscous loads of the latest pass, which a later pass of the step replaces
-    std::size_t m_lastStep = 0;
-    bool m_hasSolved = false;
-    std::size_t m_lastIterations = 0;
-    Real m_lastResidual = 0;
 };
-
-std::unique_ptr<Effect> makeViscosityWeiler2018(const EffectParams& params, const Scene& scene, ParticleSet& particles);
 
 }  // namespace ganache
