@@ -156,6 +156,7 @@ const std::map<char, const char*>& glyphs() {
         {'^', "  #   # # #   #                    "}, {'=', "          #####     #####          "},
         {'(', "   #   #   #    #    #     #     # "}, {')', " #     #     #    #    #   #   #   "},
         {':', "      ##   ##        ##   ##       "}, {',', "                     ##    #   #   "},
+        {'_', "                              #####"}, {'%', "##   ##  #   #   #   #   #  ##   ##"},
         {'a', "           ###     # #####   # ####"}, {'b', "#    #    # ## ##  ##   ##   ##### "},
         {'c', "           ### #    #    #   # ### "}, {'d', "    #    # ## ##  ###   ##   # ####"},
         {'e', "           ### #   #######     ### "}, {'f', "  ##  #  # #   ###   #    #    #   "},
@@ -173,11 +174,15 @@ const std::map<char, const char*>& glyphs() {
     return g;
 }
 
+}  // namespace
+
 void fillRect(Image& image, int x0, int y0, int x1, int y1, const Vec3& colour) {
     for (int y = std::max(0, y0); y < std::min(image.height, y1); ++y)
         for (int x = std::max(0, x0); x < std::min(image.width, x1); ++x)
             for (int c = 0; c < 3; ++c) image.pixel(x, y)[c] = std::uint8_t(std::lround(255 * std::clamp<Real>(colour[c], 0, 1)));
 }
+
+namespace {
 
 std::string tickLabel(Real v) {
     if (v != 0 && (std::abs(v) >= 1e4 || std::abs(v) < 1e-2)) return fmt::format("{:.1e}", v);

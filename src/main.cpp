@@ -3,6 +3,7 @@
 
 #include "errors.h"
 #include "pipeline.h"
+#include "study.h"
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
@@ -71,6 +72,16 @@ int main(int argc, char** argv) {
     addSceneArgs(sceneCmd);
     sceneCmd->add_flag("--explain", explain, "print the effective scene (every value, defaults included, with units)");
 
+    StudyOptions study;
+    CLI::App* studyCmd = app.add_subcommand(
+        "study", "what accuracy costs in time: sweep the settings that trade accuracy for speed on the cases in "
+                 "scenes/study/ and write study.csv, a chart per case and report.md");
+    studyCmd->add_flag("--quick", study.quick, "shorter runs and two settings per knob (a few minutes on 2 cores)");
+    studyCmd->add_option("--out", study.out, "output folder (default: out/study; the committed study is docs/study)");
+    studyCmd->add_option("--scenes", study.scenes, "folder of the study's scenes (default: scenes/study)");
+    studyCmd->add_option("--case", study.cases, "only these cases: spinning_cube, couette, viscous_bunny");
+    studyCmd->add_option("--threads", study.threads, "worker threads (default 0: every core)");
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -81,6 +92,10 @@ int main(int argc, char** argv) {
     try {
         if (sceneCmd->parsed()) {
             sceneCommand(opt, explain);
+            return 0;
+        }
+        if (studyCmd->parsed()) {
+            studyCommand(study);
             return 0;
         }
         if (check) {

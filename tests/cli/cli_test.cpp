@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
 #include <sys/wait.h>
 
@@ -58,7 +59,7 @@ void writeTinyVariant(const fs::path& file, const std::string& cutAt, const std:
 
 TEST(Cli, HelpForEveryCommand) {
     EXPECT_EQ(runGanache("--help").code, 0);
-    for (const char* c : {"run", "sample", "simulate", "surface", "render", "scene"}) {
+    for (const char* c : {"run", "sample", "simulate", "surface", "render", "scene"}) {  // study: its own test
         const Result r = runGanache(std::string(c) + " --help");
         EXPECT_EQ(r.code, 0) << c;
         EXPECT_NE(r.output.find("--quality"), std::string::npos) << c;
@@ -320,4 +321,49 @@ TEST(Cli, SceneExplainPrintsAValidScene) {
     const Result check = runGanache("scene " + again.string());
     EXPECT_EQ(check.code, 0) << check.output;
     EXPECT_NE(check.output.find("is valid"), std::string::npos);
+}
+
+TEST(Cli, QuickStudyWritesItsTableChartsAndReport) {
+    // `ganache study --quick` as CI runs it: every case, two settings per knob, shortened runs.
+    const fs::path out = freshDir("study");
+    const Result r = runGanache("study --quick --threads 2 --out " + out.string() + " --scenes " +
+                                (kSource / "scenes/study").string());
+    ASSERT_EQ(r.code, 0) << r.output;
+    std::ifstream csv(out / "study.csv");
+    std::string header, line;
+    std::getline(csv, header);
+    EXPECT_EQ(header.rfind("case,knob,setting,default,threads,particles,steps,", 0), 0u) << header;
+    std::map<std::string, std::string> rows;  // "case,knob,setting" -> the whole line
+    while (std::getline(csv, line)) {
+        const std::size_t third = line.find(',', line.find(',', line.find(',') + 1) + 1);
+        rows[line.substr(0, third)] = line;
+    }
+    // Three cases x seven knobs x two settings, and the bunny's reference run.
+    EXPECT_EQ(rows.size(), 3u * 7u * 2u + 1u);
+    for (const char* c : {"spinning_cube", "couette", "viscous_bunny"}) {
+        EXPECT_TRUE(rows.count(std::string(c) + ",viscosity_method,weiler2018")) << c;
+        const ganache::Image chart = ganache::readPng(out / (std::string(c) + ".png"));
+        EXPECT_EQ(chart.width, 1200);
+        EXPECT_EQ(chart.height, 800);
+    }
+    EXPECT_TRUE(rows.count("viscous_bunny,reference,reference"));
+    // The main solver keeps the cube's angular momentum to round-off (its error column is below 1e-9).
+    const std::string& cube = rows["spinning_cube,viscosity_method,weiler2018"];
+    const std::size_t errorColumn = 12;
+    std::size_t at = 0;
+    for (std::size_t k = 0; k < errorColumn; ++k) at = cube.find(',', at) + 1;
+    EXPECT_LT(std::stod(cube.substr(at)), 1e-9) << cube;
+    std::ifstream md(out / "report.md");
+    const std::string report((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+    for (const char* s : {"## spinning_cube", "## couette", "## viscous_bunny", "Pareto front", "(halving the error costs",
+                          "Quick mode"})
+        EXPECT_NE(report.find(s), std::string::npos) << s;
+
+    // Bad options: exit 2 with the fix.
+    const Result noCase = runGanache("study --quick --case marble --out " + out.string());
+    EXPECT_EQ(noCase.code, 2);
+    EXPECT_NE(noCase.output.find("no case 'marble'"), std::string::npos) << noCase.output;
+    const Result noScenes = runGanache("study --quick --scenes /no/such/folder --out " + out.string());
+    EXPECT_EQ(noScenes.code, 2);
+    EXPECT_NE(noScenes.output.find("--scenes"), std::string::npos) << noScenes.output;
 }
