@@ -360,7 +360,8 @@ TEST(Cli, QuickStudyWritesItsTableChartsAndReport) {
         EXPECT_NE(report.find(s), std::string::npos) << s;
 
     // Bad options: exit 2 with the fix.
-    const Result noCase = runGanache("study --quick --case marble --out " + out.string());
+    const Result noCase = runGanache("study --quick --case marble --out " + out.string() + " --scenes " +
+                                     (kSource / "scenes/study").string());
     EXPECT_EQ(noCase.code, 2);
     EXPECT_NE(noCase.output.find("no case 'marble'"), std::string::npos) << noCase.output;
     const Result noScenes = runGanache("study --quick --scenes /no/such/folder --out " + out.string());
