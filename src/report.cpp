@@ -137,7 +137,7 @@ std::string RunReport::table() const {
                          heat > 0 ? fmt::format("heat {:.2f} ms, ", heat) : std::string(),
                          ms["neighbours"].get<double>(), ms["pressure"].get<double>(), ms["divergence"].get<double>(),
                          ms["viscosity"].get<double>(), ms["total"].get<double>());
-        t += fmt::format("  iterations: pressure {:.1f}/step, divergence {:.1f}/step, viscosity CG {:.1f}/solve\n",
+        t += fmt::format("  iterations: pressure {:.1f}/step, divergence {:.1f}/step, viscosity {:.1f}/solve (CG; explicit: sub-steps)\n",
                          sv["pressure_iterations_per_step"].get<double>(),
                          sv["divergence_iterations_per_step"].get<double>(),
                          sv["viscosity_iterations_per_solve"].get<double>());

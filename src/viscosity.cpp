@@ -19,10 +19,18 @@ Real fieldDot(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
     return deterministicSum(a.size(), [&](std::size_t i) { return a[i].dot(b[i]); });
 }
 
-ViscosityPass ConjugateGradient::run(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
-                                     std::vector<Vec3>& x, Real scale, Real tolerance, std::size_t maxIterations) {
+ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
+                                       const std::vector<Vec3>& v, std::vector<Vec3>& x, Real tolerance,
+                                       std::size_t maxIterations) {
     const std::size_t n = b.size();
     for (auto* a : {&r, &z, &p, &q}) a->resize(n);
+    multiply(v, q);
+    forEachParticle(n, [&](std::size_t i) { r[i] = b[i] - q[i]; });
+    scale = std::sqrt(fieldDot(r, r));
+    if (scale == 0) {
+        std::copy(v.begin(), v.end(), x.begin());
+        return {};
+    }
     multiply(x, q);
     forEachParticle(n, [&](std::size_t i) { r[i] = b[i] - q[i]; });
     precondition(r, z);
@@ -121,6 +129,19 @@ Vec3 ViscosityMethod::laplacian(const StepContext& ctx, const ParticleSet& parti
             a += boundaryCoefficient(ctx, i, k, xik) * xik.dot(relative) * ctx.kernel.gradW(xik);
         }
     return a;
+}
+
+Mat3 ViscosityMethod::boundaryBlock(const StepContext& ctx, const ParticleSet& particles, std::size_t i,
+                                    Vec3& bodyTerm) const {
+    Mat3 block = Mat3::Zero();
+    for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+        const Vec3 xik = particles.x()[i] - ctx.boundary.x[k];
+        const Real c = boundaryCoefficient(ctx, i, k, xik);
+        const Vec3 g = ctx.kernel.gradW(xik);
+        block += c * g * xik.transpose();
+        bodyTerm += c * ctx.boundary.v[k].dot(xik) * g;
+    }
+    return block;
 }
 
 std::string ViscosityMethod::capMessage(const StepContext& ctx, const ViscosityPass& pass) const {

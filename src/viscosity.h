@@ -45,10 +45,14 @@ Real fieldDot(const std::vector<Vec3>& a, const std::vector<Vec3>& b);
 struct ConjugateGradient {
     using Apply = std::function<void(const std::vector<Vec3>& in, std::vector<Vec3>& out)>;
     std::vector<Vec3> r, z, p, q;
-    /// `x` holds the initial guess; iterates until |r| <= tolerance * scale or maxIterations. On return `r`
-    /// holds the residual b - M x.
-    ViscosityPass run(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
-                      std::vector<Vec3>& x, Real scale, Real tolerance, std::size_t maxIterations);
+    Real scale = 0;  ///< |b - M v| of the last solve: the correction the solve had to make
+    /// `x` holds the initial guess; iterates until |r| <= tolerance |b - M v| (the residual relative to the
+    /// correction the solve has to make from the velocities v before it, not to |b|: at small dt that correction
+    /// is a tiny fraction of the velocity, and a |b|-relative test let a warm-started guess pass untouched step
+    /// after step, 0.1 CG iterations per solve at dt = 0.05 ms) or maxIterations. When v already solves the
+    /// system (scale 0) x becomes v. On return `r` holds the residual b - M x.
+    ViscosityPass solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
+                        const std::vector<Vec3>& v, std::vector<Vec3>& x, Real tolerance, std::size_t maxIterations);
 };
 
 /// A viscosity method as an effect. apply() takes back an earlier coupled pass's change, asks the method for the
@@ -76,6 +80,10 @@ protected:
     /// 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)), boundary particle k's term [Eq. 11-12].
     Real boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k, const Vec3& xik) const;
     bool sticky() const { return m_params.boundaryMu > 0; }
+    /// The boundary's share of particle i's implicit system [Eq. 11-12]: returns sum_k c_ik grad W_ik x_ik^T (the
+    /// operator's diagonal block, per unit mass) and adds sum_k c_ik (v_k . x_ik) grad W_ik, the bodies'
+    /// velocities, to `bodyTerm`.
+    Mat3 boundaryBlock(const StepContext& ctx, const ParticleSet& particles, std::size_t i, Vec3& bodyTerm) const;
     /// The viscous acceleration of Eq. 7 at particle i for the velocity field `in` [m/s^2]:
     /// sum_j c_ij (x_ij . (in_i - in_j)) grad W_ij, plus, with boundary viscosity, the boundary's
     /// sum_k c_ik (x_ik . (in_i - v_k)) grad W_ik, where the bodies' own velocities v_k count only when

@@ -59,24 +59,15 @@ ViscosityPass ViscosityTakahashi2015::solve(StepContext& ctx, const ParticleSet&
             block += vj * m_mu(j) * vi * vi * (g.squaredNorm() * Mat3::Identity() + g * g.transpose());
         }
         block += vi * m_mu(i) * (s.squaredNorm() * Mat3::Identity() + s * s.transpose());
-        Vec3 b = m[i] * v[i];
+        // The boundary term of Eq. 12 per unit mass, times the mass: on the diagonal, and the bodies' velocities on
+        // the right-hand side.
+        Vec3 bodies = Vec3::Zero();
+        block *= dt;
         if (sticky()) {
-            // The boundary term of Eq. 12 per unit mass, times the mass: -dt m_i sum_k c_ik grad W_ik x_ik^T
-            // on the diagonal, the bodies' velocities on the right-hand side.
-            Mat3 aik = Mat3::Zero();
-            for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
-                const Vec3 xik = x[i] - ctx.boundary.x[k];
-                const Real c = boundaryCoefficient(ctx, i, k, xik);
-                const Vec3 g = ctx.kernel.gradW(xik);
-                aik += c * g * xik.transpose();
-                b -= dt * m[i] * c * ctx.boundary.v[k].dot(xik) * g;
-            }
-            m_boundaryBlock[i] = -dt * m[i] * aik;
-            block = dt * block + m_boundaryBlock[i];
-        } else {
-            block = dt * block;
+            m_boundaryBlock[i] = -dt * m[i] * boundaryBlock(ctx, particles, i, bodies);
+            block += m_boundaryBlock[i];
         }
-        m_b[i] = b;
+        m_b[i] = m[i] * (v[i] - dt * bodies);
         const Mat3 diagonal = m[i] * Mat3::Identity() + block;
         m_inverseDiagonal[i] = jacobi ? Mat3(diagonal.inverse()) : Mat3(Mat3::Identity() / m[i]);
     });
@@ -87,16 +78,7 @@ ViscosityPass ViscosityTakahashi2015::solve(StepContext& ctx, const ParticleSet&
         forEachParticle(n, [&](std::size_t i) { z[i] = m_inverseDiagonal[i] * r[i]; });
     };
     // As in the main solver, the tolerance is relative to the correction the solve has to make.
-    std::vector<Vec3>& r = m_cg.r;
-    r.resize(n);
-    multiply(ctx, particles, v, r);
-    forEachParticle(n, [&](std::size_t i) { r[i] = m_b[i] - r[i]; });
-    const Real scale = std::sqrt(fieldDot(r, r));
-    if (scale == 0) {
-        std::copy(v.begin(), v.end(), out.begin());
-        return {};
-    }
-    return m_cg.run(system, precondition, m_b, out, scale, m_params.tolerance, std::size_t(m_params.maxIterations));
+    return m_cg.solve(system, precondition, m_b, v, out, m_params.tolerance, std::size_t(m_params.maxIterations));
 }
 
 }  // namespace ganache

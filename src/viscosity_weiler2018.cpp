@@ -87,20 +87,13 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
             const Vec3 xij = x[i] - x[j];
             aii += pairCoefficient(ctx, particles, i, j, xij) * ctx.kernel.gradW(xij) * xij.transpose();
         }
-        Vec3 b = v[i];
+        Vec3 bodies = Vec3::Zero();
         if (sticky()) {
-            Mat3 aik = Mat3::Zero();
-            for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
-                const Vec3 xik = x[i] - ctx.boundary.x[k];
-                const Real c = boundaryCoefficient(ctx, i, k, xik);
-                const Vec3 g = ctx.kernel.gradW(xik);
-                aik += c * g * xik.transpose();
-                b -= dt * c * ctx.boundary.v[k].dot(xik) * g;
-            }
+            const Mat3 aik = boundaryBlock(ctx, particles, i, bodies);
             m_boundaryBlock[i] = -dt * aik;
             aii += aik;
         }
-        m_b[i] = b;
+        m_b[i] = v[i] - dt * bodies;
         m_inverseDiagonal[i] = m_params.preconditioner == ViscosityParams::Preconditioner::None
                                    ? Mat3(Mat3::Identity())
                                    : Mat3(Mat3(Mat3::Identity() - dt * aii).inverse());
@@ -117,34 +110,24 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
         });
     };
 
-    // The tolerance is relative to the correction viscosity has to make, |b - (I - dt A) v_df|, not to |b|:
-    // at small dt that correction is a tiny fraction of the velocity, and a residual relative to |b| let a
-    // warm-started guess pass untouched step after step (0.1 CG iterations per solve at dt = 0.05 ms).
-    std::vector<Vec3>& r = m_cg.r;
-    r.resize(n);
-    multiply(ctx, particles, v, r);
-    forEachParticle(n, [&](std::size_t i) { r[i] = m_b[i] - r[i]; });
-    const Real scale = std::sqrt(fieldDot(r, r));
-    if (scale == 0) {
-        std::copy(v.begin(), v.end(), out.begin());  // v_df already solves the system
-        return {};
-    }
     const auto system = [&](const std::vector<Vec3>& in, std::vector<Vec3>& result) {
         multiply(ctx, particles, in, result);
     };
     ViscosityPass pass =
-        m_cg.run(system, precondition, m_b, out, scale, m_params.tolerance, std::size_t(m_params.maxIterations));
+        m_cg.solve(system, precondition, m_b, v, out, m_params.tolerance, std::size_t(m_params.maxIterations));
+    if (m_cg.scale == 0) return pass;  // v_df already solves the system
     // Whatever CG left, the rigid part of the residual is solved exactly: the fluid's viscous forces then
     // change its total momentum and angular momentum only through the boundary, as viscosity must. Left to
     // CG, a stiff bunny on a slipping floor (5e6 Pa s) gained angular momentum about the vertical from each
     // capped solve and spun itself apart within half a second. M Z is local, so the residual stays exact.
+    std::vector<Vec3>& r = m_cg.r;
     const Vec6 rigid = m_rigid.solve(m_rigid.project(x, r));
     forEachParticle(n, [&](std::size_t i) {
         const Vec3 u = m_rigid.velocity(rigid, x[i]);
         out[i] += u;
         r[i] -= sticky() ? Vec3(u + m_boundaryBlock[i] * u) : u;
     });
-    pass.residual = std::sqrt(fieldDot(r, r)) / scale;
+    pass.residual = std::sqrt(fieldDot(r, r)) / m_cg.scale;
     return pass;
 }
 

@@ -275,12 +275,9 @@ public:
 
     /// Runs the case with the point's settings until the case's end time.
     Run run(const Case& c, const Point& point) {
-        const fs::path file = m_dir / c.file;
-        const Scene preview = loadScene(file, Quality::parse("preview"));
         // Quick mode: radii 1.26x (half the particles) and a quarter of each case's time.
         const Real factor = point.radiusFactor * (m_quick ? kQuickRadius : 1.0);
-        Scene scene = factor == 1 ? preview
-                                  : loadScene(file, Quality::parse(fmt::format("{:.6g}", preview.previewScale * factor)));
+        Scene scene = loaded(c, factor);
         point.apply(scene);
         if (c.prepare) c.prepare(scene);
         Run r;
@@ -315,8 +312,20 @@ public:
     }
 
 private:
+    /// The case's scene at `factor` times its preview radius, read (meshes included) once per case and factor.
+    const Scene& loaded(const Case& c, Real factor) {
+        const std::string key = fmt::format("{}@{}", c.name, factor);
+        auto it = m_scenes.find(key);
+        if (it != m_scenes.end()) return it->second;
+        const fs::path file = m_dir / c.file;
+        Scene scene = loadScene(file, Quality::parse("preview"));
+        if (factor != 1) scene = loadScene(file, Quality::parse(fmt::format("{:.6g}", scene.previewScale * factor)));
+        return m_scenes.emplace(key, std::move(scene)).first->second;
+    }
+
     fs::path m_dir;
     bool m_quick;
+    std::map<std::string, Scene> m_scenes;    // by case and radius factor
     std::map<std::string, Sample> m_samples;  // by case and particle radius
 };
 

@@ -15,6 +15,12 @@
 
 namespace ganache::testing {
 
+/// A free block of 12^3 honey particles (r = 1 cm) in zero gravity: every particle near a free surface or corner.
+inline const char* kFreeBlock = R"(particles: {radius: 0.01}
+domain: {min: [-1, -1, -1], max: [1, 1, 1]}
+fluids: [{material: honey, box: {min: [-0.12, -0.12, -0.12], max: [0.12, 0.12, 0.12]}}]
+)";
+
 /// Loads a scene from text (at final quality), written to the temporary folder under `name`.
 inline Scene sceneFromText(const std::string& name, const std::string& body) {
     const std::filesystem::path dir = std::filesystem::temp_directory_path() / "ganache_solver_test";

@@ -13,12 +13,6 @@ using namespace ganache::testing;
 
 namespace {
 
-// A free block of 12^3 particles (r = 1 cm) in zero gravity.
-const char* kFreeBlock = R"(particles: {radius: 0.01}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids: [{material: honey, box: {min: [-0.12, -0.12, -0.12], max: [0.12, 0.12, 0.12]}}]
-)";
-
 ViscosityParams paramsFor(ViscosityParams::Method method, Real mu) {
     ViscosityParams p;
     p.method = method;

@@ -12,12 +12,6 @@ using namespace ganache::testing;
 
 namespace {
 
-// A free block of 12^3 particles (r = 1 cm) in zero gravity: every particle near a free surface or corner.
-const char* kFreeBlock = R"(particles: {radius: 0.01}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids: [{material: honey, box: {min: [-0.12, -0.12, -0.12], max: [0.12, 0.12, 0.12]}}]
-)";
-
 // SPH strain rate D_i = sym(sum_j (m_j / rho_j) (v_j - v_i) grad W_ij^T), the quantity strain-rate based
 // viscosity solvers build on [WKBB18 Sec. 6]; it is not part of ganache's solver.
 std::vector<Real> strainRateNorms(const Simulation& sim) {
