@@ -10,10 +10,12 @@
 #include <png.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <csetjmp>
 #include <cstdio>
 #include <map>
+#include <system_error>
 
 namespace ganache {
 
@@ -29,13 +31,14 @@ using File = std::unique_ptr<std::FILE, FileCloser>;
 void writePng(const std::filesystem::path& path, const Image& image) {
     writeAtomically(path, [&](const std::filesystem::path& tmp) {
         File f(std::fopen(tmp.c_str(), "wb"));
-        if (!f) throw std::runtime_error(fmt::format("cannot write {}", tmp.string()));
+        if (!f) throw std::system_error(errno, std::generic_category(), "cannot open it");
         png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, nullptr, nullptr, nullptr);
         png_infop info = png ? png_create_info_struct(png) : nullptr;
         if (!info) throw std::runtime_error("libpng: out of memory");
         if (setjmp(png_jmpbuf(png))) {
+            const int err = errno;
             png_destroy_write_struct(&png, &info);
-            throw std::runtime_error(fmt::format("could not write {} (disk full?)", path.string()));
+            throw std::system_error(err, std::generic_category(), "libpng could not write the image");
         }
         png_init_io(png, f.get());
         png_set_IHDR(png, info, png_uint_32(image.width), png_uint_32(image.height), 8, PNG_COLOR_TYPE_RGB,
@@ -45,7 +48,8 @@ void writePng(const std::filesystem::path& path, const Image& image) {
         for (int y = 0; y < image.height; ++y) png_write_row(png, image.pixel(0, y));
         png_write_end(png, nullptr);
         png_destroy_write_struct(&png, &info);
-        if (std::fflush(f.get()) != 0) throw std::runtime_error(fmt::format("could not write {} (disk full?)", path.string()));
+        if (std::fclose(f.release()) != 0)
+            throw std::system_error(errno, std::generic_category(), "writing the image failed");
     });
 }
 

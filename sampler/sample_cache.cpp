@@ -50,18 +50,13 @@ std::optional<std::vector<Vec3>> SampleCache::load(std::uint64_t key) const {
 }
 
 void SampleCache::store(std::uint64_t key, const std::vector<Vec3>& points) const {
-    writeAtomically(fileFor(key), [&](const std::filesystem::path& tmp) {
-        {
-            std::ofstream out(tmp, std::ios::binary);
-            const std::uint64_t count = points.size();
-            out.write(kMagic, 8);
-            out.write(reinterpret_cast<const char*>(&key), sizeof key);
-            out.write(reinterpret_cast<const char*>(&count), sizeof count);
-            out.write(reinterpret_cast<const char*>(points.data()), std::streamsize(points.size() * sizeof(Vec3)));
-            if (!out) throw std::runtime_error("could not write the sample cache");
-        }
-        appendChecksumFooter(tmp);
-    });
+    const std::uint64_t count = points.size();
+    std::string bytes(kMagic, 8);
+    bytes.append(reinterpret_cast<const char*>(&key), sizeof key);
+    bytes.append(reinterpret_cast<const char*>(&count), sizeof count);
+    bytes.append(reinterpret_cast<const char*>(points.data()), points.size() * sizeof(Vec3));
+    bytes += checksumFooter(bytes);
+    writeBytesAtomically(fileFor(key), bytes);
 }
 
 }  // namespace ganache

@@ -2,6 +2,8 @@
 # Installs the Debian packages ganache needs (only those missing), fetches the meshes of assets/ (scripts/assets.sh)
 # and builds ganache into build/ (Release).
 # Sourced by scripts/run.sh and scripts/test.sh; safe to run again: installed packages and the build are reused.
+# scripts/sanitize.sh and scripts/fuzz.sh build elsewhere: they set GANACHE_BUILD_DIR, GANACHE_CMAKE_ARGS (extra
+# configure arguments) and GANACHE_EXTRA_PACKAGES before sourcing it.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -9,6 +11,7 @@ packages=(
   cmake g++ make pkg-config ccache
   libeigen3-dev libtbb-dev libopenvdb-dev libboost-dev libboost-iostreams-dev libassimp-dev libosmesa6-dev libyaml-cpp-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev libfmt-dev nlohmann-json3-dev libpng-dev
+  ${GANACHE_EXTRA_PACKAGES:-}
 )
 missing=()
 for p in "${packages[@]}"; do
@@ -25,5 +28,7 @@ if ((${#missing[@]})); then
 fi
 
 ./scripts/assets.sh
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release
-cmake --build build --parallel "$(nproc)"
+build_dir="${GANACHE_BUILD_DIR:-build}"
+# shellcheck disable=SC2086  # the extra arguments are meant to split
+cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=Release ${GANACHE_CMAKE_ARGS:-}
+cmake --build "$build_dir" --parallel "$(nproc)"

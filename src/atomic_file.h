@@ -1,18 +1,31 @@
 #pragma once
-// Atomic output: every file is written under a temporary name in its folder and renamed into place, so a
-// killed run never leaves a half-written frame and an existing file is only replaced by a complete one.
+// Atomic output: a file appears under its name complete or not at all. Its bytes are written to an unnamed file
+// in the target folder (O_TMPFILE; on file systems without it, a hidden temporary name), flushed to the disk, and
+// only then given a name and renamed into place. A run killed at any moment leaves every earlier file as it was
+// and no half-written file under any name; a full disk is reported as such, with the fix.
 
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <string_view>
 
 namespace ganache {
 
-/// Calls write(temporaryPath), then renames the temporary file to `path`. On any failure the temporary file
-/// is removed, `path` is left as it was, and std::runtime_error names the file and the cause.
+/// Calls write(path to write to), flushes the file to the disk and renames it to `path`. `write` must throw when
+/// its own writing fails. On any failure `path` is left as it was, nothing else is left behind, and
+/// std::runtime_error names the file and the cause (a full disk says so and how to fix it).
 void writeAtomically(const std::filesystem::path& path, const std::function<void(const std::filesystem::path&)>& write);
 
+/// Writes `bytes` to `path` atomically, checking every write.
+void writeBytesAtomically(const std::filesystem::path& path, std::string_view bytes);
+
 /// Writes `text` to `path` atomically.
-void writeTextAtomically(const std::filesystem::path& path, const std::string& text);
+inline void writeTextAtomically(const std::filesystem::path& path, const std::string& text) {
+    writeBytesAtomically(path, text);
+}
+
+/// Removes what killed runs on this host left under `folder` (recursively): named temporary files of
+/// writeAtomically whose process is gone. Returns how many were removed.
+std::size_t removeStaleTemporaries(const std::filesystem::path& folder);
 
 }  // namespace ganache

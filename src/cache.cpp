@@ -1,8 +1,8 @@
 #include "cache.h"
 
-#include "atomic_file.h"
 #include "checksum.h"
 #include "errors.h"
+#include "vdb_file.h"
 
 #include <fmt/format.h>
 
@@ -105,12 +105,7 @@ void writeParticleCache(const std::filesystem::path& path, const ParticleSet& fl
         grids.push_back(bgrid);
     }
 
-    writeAtomically(path, [&](const std::filesystem::path& tmp) {
-        openvdb::io::File file(tmp.string());
-        file.write(grids);
-        file.close();
-        appendChecksumFooter(tmp);
-    });
+    writeVdbAtomically(path, openvdb::GridCPtrVec(grids.begin(), grids.end()));
 }
 
 CacheContents readParticleCache(const std::filesystem::path& path) {

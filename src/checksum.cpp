@@ -11,7 +11,7 @@ namespace ganache {
 namespace {
 
 constexpr char kMagic[8] = {'G', 'N', 'C', 'H', 'S', 'U', 'M', '1'};
-constexpr std::size_t kFooterSize = 24;  // magic, payload length, hash
+constexpr std::size_t kFooterSize = kChecksumFooterSize;
 
 struct File {
     std::FILE* f;
@@ -45,19 +45,33 @@ std::uint64_t fnv1a64(const void* data, std::size_t size, std::uint64_t hash) {
     return hash;
 }
 
-void appendChecksumFooter(const std::filesystem::path& file) {
-    File f{std::fopen(file.c_str(), "r+b")};
-    if (!f.f) throw std::runtime_error("cannot reopen " + file.string() + " to seal it");
-    std::fseek(f.f, 0, SEEK_END);
-    const std::uint64_t length = std::uint64_t(std::ftell(f.f));
-    const std::uint64_t hash = hashPrefix(f.f, length);
-    std::array<unsigned char, kFooterSize> footer{};
+std::string checksumFooter(std::string_view payload) {
+    const std::uint64_t length = payload.size();
+    const std::uint64_t hash = fnv1a64(payload.data(), payload.size());
+    std::string footer(kFooterSize, '\0');
     std::memcpy(footer.data(), kMagic, 8);
     std::memcpy(footer.data() + 8, &length, 8);
     std::memcpy(footer.data() + 16, &hash, 8);
-    std::fseek(f.f, 0, SEEK_END);
-    if (std::fwrite(footer.data(), 1, footer.size(), f.f) != footer.size() || std::fflush(f.f) != 0)
-        throw std::runtime_error("cannot write the checksum footer of " + file.string() + " (disk full?)");
+    return footer;
+}
+
+bool checksumFooterMatches(std::string_view bytes, std::string& why) {
+    if (bytes.size() < kFooterSize || std::memcmp(bytes.data() + bytes.size() - kFooterSize, kMagic, 8) != 0) {
+        why = "has no ganache checksum footer (truncated, or not written by ganache)";
+        return false;
+    }
+    std::uint64_t length, hash;
+    std::memcpy(&length, bytes.data() + bytes.size() - 16, 8);
+    std::memcpy(&hash, bytes.data() + bytes.size() - 8, 8);
+    if (length != bytes.size() - kFooterSize) {
+        why = "has the wrong length for its checksum footer (truncated or extended)";
+        return false;
+    }
+    if (fnv1a64(bytes.data(), length) != hash) {
+        why = "fails its checksum (corrupt)";
+        return false;
+    }
+    return true;
 }
 
 bool verifyChecksumFooter(const std::filesystem::path& file, std::string& why) {

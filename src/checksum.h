@@ -5,16 +5,22 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <string_view>
 
 namespace ganache {
 
 constexpr std::uint64_t kFnvOffset = 0xcbf29ce484222325ULL;
+constexpr std::size_t kChecksumFooterSize = 24;  ///< magic, payload length, hash
 
 /// FNV-1a 64 of `size` bytes, continuing from `hash`.
 std::uint64_t fnv1a64(const void* data, std::size_t size, std::uint64_t hash = kFnvOffset);
 
-/// Appends a footer (magic, payload length, FNV-1a 64 of the payload) to the file.
-void appendChecksumFooter(const std::filesystem::path& file);
+/// The footer that seals `payload` when appended to it: magic, payload length, FNV-1a 64 of the payload.
+std::string checksumFooter(std::string_view payload);
+
+/// True when `bytes` (a payload followed by its footer) ends in a footer that matches the payload; otherwise `why`
+/// says what is wrong (no footer, length mismatch, checksum mismatch).
+bool checksumFooterMatches(std::string_view bytes, std::string& why);
 
 /// True when the file ends in a footer whose length and checksum match the bytes before it.
 /// `why` says what is wrong otherwise (no footer, length mismatch, checksum mismatch).

@@ -82,6 +82,24 @@ void Emitters::emit(Real t0, Real dt, ParticleSet& particles, std::uint64_t& nex
     }
 }
 
+std::vector<EmitterState> Emitters::state() const {
+    std::vector<EmitterState> out;
+    for (std::size_t e = 0; e < m_nozzles.size(); ++e) out.push_back({m_nozzles[e].travelled, m_reports[e]});
+    return out;
+}
+
+void Emitters::restore(const std::vector<EmitterState>& state) {
+    bool same = state.size() == m_nozzles.size();
+    for (std::size_t e = 0; same && e < state.size(); ++e) same = state[e].report.name == m_reports[e].name;
+    if (!same)
+        throw std::runtime_error(fmt::format("the saved state has {} emitter(s), the scene {} (or their names differ)",
+                                             state.size(), m_nozzles.size()));
+    for (std::size_t e = 0; e < state.size(); ++e) {
+        m_nozzles[e].travelled = state[e].travelled;
+        m_reports[e] = state[e].report;
+    }
+}
+
 void Emitters::emitLayer(Nozzle& n, std::size_t index, Real t, Real age, ParticleSet& particles,
                          std::uint64_t& nextId, SolverStats& stats) {
     const BodyMotion& motion = n.spec.motion;

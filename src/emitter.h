@@ -27,6 +27,13 @@ struct EmitterReport {
     std::size_t blocked = 0;  ///< sites skipped because fluid still sat there
 };
 
+/// What one emitter carries from one step to the next: the distance its fluid has travelled since its last layer
+/// [m], and its report so far. Checkpoints save it.
+struct EmitterState {
+    Real travelled = 0;
+    EmitterReport report;
+};
+
 /// Every emitter of a scene. A layer of particles leaves a nozzle each time the emitted fluid has travelled one
 /// lattice spacing 2r, so layers stack into the same lattice (and rest density) the sampler builds.
 class Emitters {
@@ -39,6 +46,10 @@ public:
     void emit(Real t0, Real dt, ParticleSet& particles, std::uint64_t& nextId, SolverStats& stats);
 
     const std::vector<EmitterReport>& reports() const { return m_reports; }
+
+    std::vector<EmitterState> state() const;
+    /// Continues from a saved state; std::runtime_error when it is not of these emitters.
+    void restore(const std::vector<EmitterState>& state);
 
 private:
     struct Nozzle {

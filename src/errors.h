@@ -1,6 +1,7 @@
 #pragma once
-// The two kinds of failure a ganache library reports. Only main() prints them and picks the exit code:
-// InputError (and SceneError, derived from it) -> exit 2, any other std::exception -> exit 1.
+// The kinds of failure a ganache library reports. Only main() prints them and picks the exit code:
+// InputError (and SceneError, derived from it) -> exit 2, Interrupted -> 128 + the signal (130 for SIGINT, 143 for
+// SIGTERM, as shells report them), any other std::exception -> exit 1.
 
 #include <stdexcept>
 #include <string>
@@ -29,6 +30,16 @@ public:
 
 private:
     Location m_at;
+};
+
+/// A run that stopped on SIGINT or SIGTERM after saving what it had (see interrupt.h).
+class Interrupted : public std::runtime_error {
+public:
+    Interrupted(int signal, const std::string& what) : std::runtime_error(what), m_signal(signal) {}
+    int signal() const { return m_signal; }
+
+private:
+    int m_signal;
 };
 
 }  // namespace ganache

@@ -1,5 +1,5 @@
 // ganache: the command line. Parses arguments, calls the pipeline, maps errors to exit codes:
-// 0 success, 2 bad input, 1 run-time failure.
+// 0 success, 2 bad input, 1 run-time failure, 130 / 143 stopped by SIGINT / SIGTERM (after a checkpoint).
 
 #include "errors.h"
 #include "pipeline.h"
@@ -28,7 +28,6 @@ int main(int argc, char** argv) {
         c->add_option("--out", opt.out, "output folder (default: out/<scene name>)");
         c->add_option("--frames", opt.frames, "frame range A-B (or one frame A) within the scene's frames");
         c->add_option("--threads", opt.threads, "worker threads (default 0: every core)");
-        c->add_flag("--resume", opt.resume, "continue from the newest checkpoint (checkpoints arrive with issue 9)");
     };
 
     struct Command {
@@ -54,6 +53,10 @@ int main(int argc, char** argv) {
         subs.push_back(app.add_subcommand(c.name, c.help));
         addRunArgs(subs.back());
     }
+    for (std::size_t i : {std::size_t(0), std::size_t(2)})
+        subs[i]->add_flag("--resume", opt.resume,
+                          "continue the simulation from the newest valid checkpoint in the output folder (none: from "
+                          "the start); frames written before it are kept");
     for (std::size_t i : {std::size_t(0), std::size_t(3), std::size_t(4)})
         subs[i]->add_flag("--force", opt.force,
                           "redo surface and render frames whose outputs are newer than their inputs");
@@ -108,6 +111,9 @@ int main(int argc, char** argv) {
     } catch (const InputError& e) {
         fmt::print(stderr, "error: {}\n", e.what());
         return 2;
+    } catch (const Interrupted& e) {
+        fmt::print(stderr, "stopped: {}\n", e.what());
+        return 128 + e.signal();
     } catch (const std::exception& e) {
         fmt::print(stderr, "error: {}\n", e.what());
         return 1;

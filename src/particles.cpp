@@ -56,6 +56,37 @@ const std::vector<Vec3>* ParticleSet::findVector(const std::string& name) const 
 }
 
 namespace {
+
+template <class Map>
+std::string namesOf(const Map& attributes) {
+    std::string out;
+    for (const auto& entry : attributes) out += (out.empty() ? "" : ", ") + entry.first;
+    return out.empty() ? "none" : out;
+}
+
+template <class Map>
+bool sameNames(const Map& a, const Map& b) {
+    return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(),
+                                              [](const auto& p, const auto& q) { return p.first == q.first; });
+}
+
+}  // namespace
+
+void ParticleSet::assignValues(const ParticleSet& other) {
+    if (!sameNames(m_scalars, other.m_scalars) || !sameNames(m_vectors, other.m_vectors) ||
+        m_uncached != other.m_uncached)
+        throw std::runtime_error("the saved particles carry the attributes " + namesOf(other.m_scalars) + " / " +
+                                 namesOf(other.m_vectors) + ", this simulation's carry " + namesOf(m_scalars) + " / " +
+                                 namesOf(m_vectors));
+    m_x = other.m_x;
+    m_v = other.m_v;
+    m_mass = other.m_mass;
+    m_id = other.m_id;
+    for (auto& [name, values] : m_scalars) values = other.m_scalars.at(name);
+    for (auto& [name, values] : m_vectors) values = other.m_vectors.at(name);
+}
+
+namespace {
 template <class T>
 void permute(std::vector<T>& a, const std::vector<std::uint32_t>& perm) {
     std::vector<T> out(a.size());

@@ -45,6 +45,10 @@ public:
     const std::map<std::string, std::vector<Real>>& scalars() const { return m_scalars; }
     const std::map<std::string, std::vector<Vec3>>& vectors() const { return m_vectors; }
 
+    /// Takes every value of `other`, which must carry the same attributes (names and cached or not), keeping this
+    /// set's arrays where they are (effects hold them by address); std::runtime_error otherwise.
+    void assignValues(const ParticleSet& other);
+
     /// Permutes every attribute: particle i afterwards is the particle perm[i] before.
     /// perm must be a permutation of 0..size()-1.
     void reorder(const std::vector<std::uint32_t>& perm);

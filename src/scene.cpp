@@ -673,6 +673,8 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
         p.minIterations = ps.integer("min_iterations", p.minIterations, 0, p.maxIterations);
         ps.rejectUnused();
         scene.viscosityCoupling = sim.integer("viscosity_coupling", scene.viscosityCoupling, 0, 10);
+        scene.checkpointEvery = sim.integer("checkpoint_every", scene.checkpointEvery, 0, 9999);
+        scene.checkpointsKept = sim.integer("checkpoints_kept", scene.checkpointsKept, 1, 100);
         sim.rejectUnused();
     }
     if (auto eff = root.child("effects")) scene.effects = readEffects(*eff);

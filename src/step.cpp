@@ -67,12 +67,48 @@ Simulation::Simulation(const Scene& scene, ParticleSet fluid, const std::vector<
         for (std::uint64_t id : m_fluid.id()) m_nextId = std::max(m_nextId, id + 1);
     }
 
-    updateNeighbours();
+    updateNeighbours(true);
     computeDensities();
     m_pressure->computeFactors(context(0), m_fluid);
 }
 
 Simulation::~Simulation() = default;
+
+SimulationState Simulation::state() const {
+    SimulationState s;
+    s.time = m_time;
+    s.step = m_step;
+    s.nextId = m_nextId;
+    s.fluid = m_fluid;
+    if (m_emitters) s.emitters = m_emitters->state();
+    s.totalImpulse = m_totalImpulse;
+    s.totalAngular = m_totalAngular;
+    s.peakForce = m_peakForce;
+    s.stats = m_stats;
+    return s;
+}
+
+void Simulation::restore(const SimulationState& s) {
+    const std::size_t bodies = m_boundary.names.size();
+    if (s.totalImpulse.size() != bodies || s.totalAngular.size() != bodies || s.peakForce.size() != bodies)
+        throw std::runtime_error(fmt::format("the saved state has {} boundary bodies, the scene {}",
+                                             s.totalImpulse.size(), bodies));
+    if (m_emitters) m_emitters->restore(s.emitters);
+    else if (!s.emitters.empty()) throw std::runtime_error("the saved state has emitters, the scene none");
+    m_fluid.assignValues(s.fluid);  // in place: the effects hold their attributes by address
+    m_time = s.time;
+    m_step = s.step;
+    m_nextId = s.nextId;
+    m_totalImpulse = s.totalImpulse;
+    m_totalAngular = s.totalAngular;
+    m_peakForce = s.peakForce;
+    m_stats = s.stats;
+    // What the saved simulation computed at the end of its last step, from the same positions and order.
+    moveBoundaries(m_time);
+    updateNeighbours(false);
+    computeDensities();
+    m_pressure->computeFactors(context(0), m_fluid);
+}
 
 StepContext Simulation::context(Real dt) {
     return StepContext{dt, m_time, m_step, m_kernel, m_fluidNeighbours, m_boundaryNeighbours,
@@ -110,10 +146,10 @@ std::vector<BodyReport> Simulation::bodyReports() const {
     return out;
 }
 
-void Simulation::updateNeighbours() {
+void Simulation::updateNeighbours(bool mayReorder) {
     const Real h = m_kernel.supportRadius();
     m_fluidGrid.build(m_fluid.x());
-    if (m_step % kReorderInterval == 0) {
+    if (mayReorder && m_step % kReorderInterval == 0) {
         // The one place particles are reordered: every attribute moves together.
         m_fluid.reorder(m_fluidGrid.sortedIndices());
         m_fluidGrid.build(m_fluid.x());
@@ -307,7 +343,7 @@ void Simulation::step(Real maxDt) {
     {
         ScopedTimer t(m_stats.time.neighbours);
         moveBoundaries(m_time + dt);
-        updateNeighbours();
+        updateNeighbours(true);
         computeDensities();
         m_pressure->computeFactors(ctx, m_fluid);
     }
@@ -334,8 +370,9 @@ void Simulation::step(Real maxDt) {
     m_stats.dtMax = std::max(m_stats.dtMax, dt);
 }
 
-void Simulation::advanceTo(Real t) {
+bool Simulation::advanceTo(Real t, const std::function<bool()>& keepGoing) {
     while (t - m_time > 1e-12 * std::max<Real>(1, std::abs(t))) {
+        if (keepGoing && !keepGoing()) return false;
         const Real left = t - m_time;
         const Real dt = chooseDt(left);
         // Never end on a sliver: the constant-density solve removes the leftover compression within one step, so
@@ -343,6 +380,7 @@ void Simulation::advanceTo(Real t) {
         // warm start carried that pressure on). Between one and two steps left, take two halves.
         step(left > dt && left < 2 * dt ? left / 2 : left);
     }
+    return true;
 }
 
 }  // namespace ganache

@@ -15,6 +15,7 @@
 #include "particles.h"
 #include "scene.h"
 
+#include <functional>
 #include <limits>
 #include <memory>
 #include <string>
@@ -96,6 +97,19 @@ struct StepContext {
     BodyLoads& loads;
 };
 
+/// Everything a simulation carries from one step to the next beyond what its scene and sample give: checkpoints
+/// save it, and a simulation restored from it takes the same steps as the one it was saved from.
+struct SimulationState {
+    Real time = 0;
+    std::uint64_t step = 0;
+    std::uint64_t nextId = 0;  ///< id of the next emitted particle
+    ParticleSet fluid;         ///< every attribute, the solvers' warm starts included, in the simulation's order
+    std::vector<EmitterState> emitters;
+    std::vector<Vec3> totalImpulse, totalAngular;  ///< per body, over the run
+    std::vector<Real> peakForce;
+    SolverStats stats;
+};
+
 /// A running simulation: fluid particles, boundaries and the effects of the scene.
 class Simulation {
 public:
@@ -106,7 +120,13 @@ public:
     /// the first non-finite value.
     void step(Real maxDt = std::numeric_limits<Real>::infinity());
     /// Steps until the time reaches t exactly; the last two steps share what is left, so none is a sliver.
-    void advanceTo(Real t);
+    /// Before each step it asks `keepGoing` (when given) and returns false as soon as that says no.
+    bool advanceTo(Real t, const std::function<bool()>& keepGoing = {});
+
+    /// The state to save, and the way back to it: restore() takes a simulation built from the same scene and
+    /// sample to the saved moment; std::runtime_error when the state is not of this scene.
+    SimulationState state() const;
+    void restore(const SimulationState& state);
 
     Real time() const { return m_time; }
     const ParticleSet& particles() const { return m_fluid; }
@@ -125,7 +145,7 @@ public:
 
 private:
     StepContext context(Real dt);
-    void updateNeighbours();
+    void updateNeighbours(bool mayReorder);
     void computeDensities();
     Real chooseDt(Real maxDt) const;
     void removeEscaped();

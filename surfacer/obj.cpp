@@ -7,8 +7,10 @@
 
 #include <fmt/format.h>
 
+#include <cerrno>
 #include <fstream>
 #include <sstream>
+#include <system_error>
 
 namespace ganache {
 
@@ -36,7 +38,8 @@ void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const 
             }
             out << '\n';
         }
-        if (!out.flush()) throw std::runtime_error("could not write the mesh (disk full?)");
+        out.close();
+        if (!out) throw std::system_error(errno, std::generic_category(), "writing the mesh failed");
     });
 }
 

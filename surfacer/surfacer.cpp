@@ -1,6 +1,6 @@
 #include "surfacer.h"
 
-#include "atomic_file.h"
+#include "vdb_file.h"
 #include "kernels.h"
 #include "neighbour_search.h"
 #include "parallel.h"
@@ -354,7 +354,7 @@ void FrameSurface::writeVdb(const std::filesystem::path& path, const std::string
         g->insertMeta("ganache_scene", openvdb::StringMetadata(sceneName));
         g->insertMeta("ganache_frame", openvdb::Int64Metadata(frame));
     }
-    writeAtomically(path, [&](const std::filesystem::path& tmp) { openvdb::io::File(tmp.string()).write(grids); });
+    writeVdbAtomically(path, openvdb::GridCPtrVec(grids.begin(), grids.end()));
 }
 
 FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSettings& settings) {

@@ -1,6 +1,7 @@
 #include "pipeline.h"
 #include "stages.h"
 
+#include "atomic_file.h"
 #include "cache.h"
 #include "errors.h"
 #include "progress.h"
@@ -64,58 +65,6 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
                                                sample.cacheMisses)
                                  : std::string());
     m["mesh_cache"] = {{"hits", sample.cacheHits}, {"misses", sample.cacheMisses}};
-}
-
-// Frames carry the boundary particles of the bodies that move (static ones are in the sample).
-std::vector<BoundaryBody> movingBodies(const BoundaryParticles& b) {
-    std::vector<BoundaryBody> out;
-    if (!b.anyMoving) return out;
-    for (std::size_t body = 0; body < b.names.size(); ++body) out.push_back({b.names[body], {}, {}});
-    for (std::size_t k = 0; k < b.x.size(); ++k) {
-        out[b.body[k]].x.push_back(b.x[k]);
-        out[b.body[k]].volume.push_back(b.volume[k]);
-    }
-    return out;
-}
-
-void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
-                 RunReport& report) {
-    StageRecord& stage = report.addStage("simulate");
-    Stopwatch clock;
-    CacheContents start = readParticleCache(layout.sample());
-    if (std::abs(start.info.particleRadius - scene.particleRadius) > 1e-9 * scene.particleRadius)
-        throw InputError(fmt::format("{}: sampled at particle radius {} m, but this run uses {} m ({} quality)\n  fix: "
-                                     "run `ganache sample` with the same --quality first",
-                                     layout.sample().string(), formatNumber(start.info.particleRadius),
-                                     formatNumber(scene.particleRadius), scene.quality.str()));
-    std::size_t boundaryCount = 0;
-    for (const auto& b : start.boundaries) boundaryCount += b.x.size();
-    report.setCounts(start.fluid.size(), boundaryCount);
-
-    Simulation sim(scene, std::move(start.fluid), start.boundaries);
-    const FrameRange& fr = scene.frames;
-    auto writeFrame = [&](std::int64_t f) {
-        if (f < frames.first || f > frames.second) return;
-        writeParticleCache(layout.particles(f), sim.particles(), movingBodies(sim.boundary()),
-                           {scene.name, f, sim.time(), fr.fps, scene.particleRadius});
-        stage.outputs.push_back(layout.particles(f).string());
-    };
-    Progress progress("simulate", std::size_t(frames.second - fr.start));
-    writeFrame(fr.start);
-    for (std::int64_t f = fr.start + 1; f <= frames.second; ++f) {
-        sim.advanceTo(fr.timeOf(f));
-        writeFrame(f);
-        progress.update(std::size_t(f - fr.start));
-    }
-    progress.finish();
-    report.setSimulation(sim.stats(), sim.time(), sim.effectNames(), sim.particles().size());
-    report.setBodies(sim.boundary().names, sim.bodyReports());
-    report.setEmitters(sim.emitterReports());
-    stage.seconds = clock.seconds();
-    const SolverStats& s = sim.stats();
-    stage.note = fmt::format("{} steps to t = {:.3f} s, {} frames written{}", s.steps, sim.time(),
-                             stage.outputs.size(),
-                             s.warningCount ? fmt::format(", {} warnings", s.warningCount) : std::string());
 }
 
 // Memory this process can still get: the machine's MemAvailable, or less when a cgroup (v2: a farm's container
@@ -258,6 +207,10 @@ std::filesystem::path OutputLayout::preview(std::int64_t frame) const {
     return root / "preview" / fmt::format("{}.{:04}.png", name, frame);
 }
 
+std::filesystem::path OutputLayout::checkpoint(std::int64_t frame, std::uint64_t step) const {
+    return checkpoints() / fmt::format("{}.{:04}.{:07}.ckpt", name, frame, step);
+}
+
 std::filesystem::path OutputLayout::particles(std::int64_t frame) const {
     return root / "particles" / fmt::format("{}.{:04}.vdb", name, frame);
 }
@@ -291,15 +244,17 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
     const Scene scene = loadScene(options.scene, quality);
     const auto frames = options.frames.empty() ? std::make_pair(scene.frames.start, scene.frames.end)
                                                : parseFrameRange(options.frames, scene.frames);
-    if (options.resume)
-        throw InputError("--resume: this build writes no checkpoints yet (issue 9), so there is nothing to resume\n"
-                         "  fix: run without --resume");
 
     const int threads = options.threads > 0 ? options.threads : tbb::info::default_concurrency();
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
     const OutputLayout layout{options.out.empty() ? std::filesystem::path("out") / scene.name : options.out,
                               scene.name};
     RunReport report(scene, threads);
+    if (const std::size_t stale = removeStaleTemporaries(layout.root))
+        fmt::print(stderr, "removed {} unfinished file(s) that a killed run left in {}\n", stale, layout.root.string());
+    const bool simulates = std::find(stages.begin(), stages.end(), StageId::Simulate) != stages.end();
+    const std::optional<Checkpoint> resumeFrom =
+        options.resume && simulates ? findResumePoint(scene, layout, report) : std::nullopt;
 
     // A stage run on its own must be asked for by the scene (`run` skips it quietly instead).
     auto requireSection = [&](const char* section, bool requested) {
@@ -310,9 +265,15 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
     };
     for (StageId id : stages) {
         if (id == StageId::Sample) {
-            runSample(scene, layout, report);
+            if (resumeFrom && std::filesystem::exists(layout.sample())) {
+                StageRecord& stage = report.addStage("sample");
+                stage.status = "skipped";
+                stage.note = "resuming: the sample the checkpoint was simulated from is kept";
+            } else {
+                runSample(scene, layout, report);
+            }
         } else if (id == StageId::Simulate) {
-            runSimulate(scene, layout, frames, report);
+            runSimulate(scene, layout, frames, resumeFrom, report);
         } else if (id == StageId::Surface) {
             requireSection("surface", scene.surface.requested);
             runSurface(scene, layout, frames, options.force, threads, options.memoryGiB, report);

@@ -30,7 +30,7 @@ struct RunOptions {
 std::pair<std::int64_t, std::int64_t> parseFrameRange(const std::string& text, const FrameRange& scene);
 
 /// Output locations of a scene: <out>/sample/<name>.vdb, <out>/particles/<name>.NNNN.vdb, <out>/report.json,
-/// <out>/cache/ (the sampler's mesh cache).
+/// <out>/cache/ (the sampler's mesh cache), <out>/checkpoints/.
 struct OutputLayout {
     std::filesystem::path root;
     std::string name;
@@ -43,6 +43,9 @@ struct OutputLayout {
     std::filesystem::path sheet() const { return root / "preview" / (name + ".sheet.png"); }
     std::filesystem::path video() const { return root / "preview" / (name + ".mp4"); }
     std::filesystem::path report() const { return root / "report.json"; }
+    std::filesystem::path checkpoints() const { return root / "checkpoints"; }
+    /// <out>/checkpoints/<name>.FFFF.SSSSSSS.ckpt: saved after frame F was written, at step S.
+    std::filesystem::path checkpoint(std::int64_t frame, std::uint64_t step) const;
 };
 
 /// `ganache run` (every stage the scene asks for) or one stage on its own. Throws InputError for bad input,

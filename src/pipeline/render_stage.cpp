@@ -3,6 +3,7 @@
 
 #include "stages.h"
 
+#include "atomic_file.h"
 #include "cache.h"
 #include "errors.h"
 #include "progress.h"
@@ -281,20 +282,22 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         if (!onPath("ffmpeg")) {
             videoNote = "; no MP4: ffmpeg is not installed (`apt-get install ffmpeg`)";
         } else {
-            const std::filesystem::path tmp = layout.video().string() + ".part.mp4";
-            const std::string command = fmt::format(
-                "ffmpeg -y -loglevel error -framerate {} -start_number {} -i '{}' -frames:v {} -c:v libx264 "
-                "-pix_fmt yuv420p -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2' '{}'",
-                formatNumber(scene.frames.fps), frames.first,
-                (layout.preview(frames.first).parent_path() / (scene.name + ".%04d.png")).string(), count, tmp.string());
-            const int status = std::system(command.c_str());
-            if (status == 0) {
-                std::filesystem::rename(tmp, layout.video());
+            // ffmpeg writes into the atomic writer's file (it names the muxer: the file has no .mp4 name yet).
+            try {
+                writeAtomically(layout.video(), [&](const std::filesystem::path& target) {
+                    const std::string command = fmt::format(
+                        "ffmpeg -y -loglevel error -framerate {} -start_number {} -i '{}' -frames:v {} -c:v libx264 "
+                        "-pix_fmt yuv420p -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2' -f mp4 '{}'",
+                        formatNumber(scene.frames.fps), frames.first,
+                        (layout.preview(frames.first).parent_path() / (scene.name + ".%04d.png")).string(), count,
+                        target.string());
+                    const int status = std::system(command.c_str());
+                    if (status != 0) throw std::runtime_error(fmt::format("ffmpeg failed (exit {})", WEXITSTATUS(status)));
+                });
                 stage.outputs.push_back(layout.video().string());
                 videoNote = "; MP4 written";
-            } else {
-                std::filesystem::remove(tmp);
-                report.addWarning(fmt::format("render: ffmpeg failed (exit {}); no MP4", WEXITSTATUS(status)));
+            } catch (const std::runtime_error& e) {
+                report.addWarning(fmt::format("render: no MP4: {}", e.what()));
             }
         }
     }

@@ -1,10 +1,12 @@
 #pragma once
 // What the stages' source files share inside the pipeline library.
 
+#include "checkpoint.h"
 #include "pipeline.h"
 #include "report.h"
 
 #include <filesystem>
+#include <optional>
 #include <utility>
 
 namespace ganache {
@@ -15,6 +17,16 @@ bool upToDate(const std::filesystem::path& output, const std::filesystem::path& 
 /// Throws InputError naming the first frame of the range without a particle cache, before a stage does any work.
 void requireParticleCaches(const char* stage, const Scene& scene, const OutputLayout& layout,
                            std::pair<std::int64_t, std::int64_t> frames);
+
+/// The checkpoint `--resume` continues from: the newest in <out>/checkpoints that reads back whole (each one
+/// that does not is reported and skipped); none when there is none. InputError when it belongs to another
+/// version of the scene or another quality.
+std::optional<Checkpoint> findResumePoint(const Scene& scene, const OutputLayout& layout, RunReport& report);
+
+/// The simulate stage (simulate_stage.cpp), from the sample or from a checkpoint. Throws Interrupted after
+/// saving a checkpoint when SIGINT or SIGTERM arrives.
+void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
+                 const std::optional<Checkpoint>& from, RunReport& report);
 
 /// The render stage (render_stage.cpp).
 void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,

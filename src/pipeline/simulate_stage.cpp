@@ -1,0 +1,185 @@
+// The simulate stage: the sample stepped frame by frame into particle caches, with checkpoints every few frames
+// (simulation.checkpoint_every), on SIGINT / SIGTERM, and after the last frame; `--resume` continues from the
+// newest one that reads back whole.
+
+#include "pipeline.h"
+#include "stages.h"
+
+#include "cache.h"
+#include "checkpoint.h"
+#include "errors.h"
+#include "interrupt.h"
+#include "progress.h"
+#include "report.h"
+#include "step.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <csignal>
+#include <cstring>
+
+namespace ganache {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Frames carry the boundary particles of the bodies that move (static ones are in the sample).
+std::vector<BoundaryBody> movingBodies(const BoundaryParticles& b) {
+    std::vector<BoundaryBody> out;
+    if (!b.anyMoving) return out;
+    for (std::size_t body = 0; body < b.names.size(); ++body) out.push_back({b.names[body], {}, {}});
+    for (std::size_t k = 0; k < b.x.size(); ++k) {
+        out[b.body[k]].x.push_back(b.x[k]);
+        out[b.body[k]].volume.push_back(b.volume[k]);
+    }
+    return out;
+}
+
+// The scene's checkpoints in the folder, oldest first: names sort by frame, then step.
+std::vector<fs::path> checkpointFiles(const OutputLayout& layout) {
+    std::vector<fs::path> out;
+    std::error_code ec;
+    for (auto it = fs::directory_iterator(layout.checkpoints(), ec); !ec && it != fs::directory_iterator();
+         it.increment(ec)) {
+        const std::string name = it->path().filename().string();
+        if (name.size() > layout.name.size() + 6 && name.rfind(layout.name + ".", 0) == 0 &&
+            name.compare(name.size() - 5, 5, ".ckpt") == 0)
+            out.push_back(it->path());
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+}
+
+// Writes the checkpoint, then drops the scene's checkpoints that sort after it (left by an earlier run that went
+// further: not this run's history) and all but the newest `kept` before it.
+fs::path saveCheckpoint(const Scene& scene, const OutputLayout& layout, const Simulation& sim, std::int64_t frame) {
+    const SimulationState state = sim.state();
+    const fs::path path = layout.checkpoint(frame, state.step);
+    writeCheckpoint(path, {scene.name, scene.hash, scene.particleRadius, frame}, state);
+    const std::vector<fs::path> files = checkpointFiles(layout);
+    const auto self = std::find(files.begin(), files.end(), path);
+    std::error_code ec;
+    for (auto it = files.begin(); it != files.end(); ++it)
+        if (it > self || self - it >= scene.checkpointsKept) fs::remove(*it, ec);
+    return path;
+}
+
+}  // namespace
+
+std::optional<Checkpoint> findResumePoint(const Scene& scene, const OutputLayout& layout, RunReport& report) {
+    const std::vector<fs::path> files = checkpointFiles(layout);
+    for (auto it = files.rbegin(); it != files.rend(); ++it) {
+        Checkpoint c;
+        try {
+            c = readCheckpoint(*it);
+        } catch (const std::exception& e) {
+            const std::string text =
+                fmt::format("checkpoint {} is unusable: {}; {}", it->string(), e.what(),
+                            std::next(it) != files.rend() ? "trying the one before it" : "no older one is left");
+            fmt::print(stderr, "resume: {}\n", text);
+            report.addWarning("resume: " + text);
+            continue;
+        }
+        if (c.info.sceneHash != scene.hash || c.info.scene != scene.name)
+            throw InputError(fmt::format(
+                "--resume: {} was saved from another version of the scene (hash {}; {} now has hash {})\n  fix: "
+                "restore the scene file it was saved from, or run without --resume to start over",
+                it->string(), c.info.sceneHash, scene.file.string(), scene.hash));
+        if (std::abs(c.info.particleRadius - scene.particleRadius) > 1e-9 * scene.particleRadius)
+            throw InputError(fmt::format("--resume: {} was saved at particle radius {} m, this run uses {} m ({} "
+                                         "quality)\n  fix: resume with the --quality it was run at, or run "
+                                         "without --resume to start over",
+                                         it->string(), formatNumber(c.info.particleRadius),
+                                         formatNumber(scene.particleRadius), scene.quality.str()));
+        fmt::print(stderr, "resume: from {} (frame {}, t = {:.4f} s, step {})\n", it->string(), c.info.frame,
+                   c.state.time, c.state.step);
+        return c;
+    }
+    const std::string text = files.empty()
+                                 ? fmt::format("no checkpoint in {}: starting from the beginning",
+                                               layout.checkpoints().string())
+                                 : "no checkpoint reads back whole: starting from the beginning";
+    fmt::print(stderr, "resume: {}\n", text);
+    if (!files.empty()) report.addWarning("resume: " + text);
+    return std::nullopt;
+}
+
+void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
+                 const std::optional<Checkpoint>& from, RunReport& report) {
+    StageRecord& stage = report.addStage("simulate");
+    Stopwatch clock;
+    CacheContents start = readParticleCache(layout.sample());
+    if (std::abs(start.info.particleRadius - scene.particleRadius) > 1e-9 * scene.particleRadius)
+        throw InputError(fmt::format("{}: sampled at particle radius {} m, but this run uses {} m ({} quality)\n  fix: "
+                                     "run `ganache sample` with the same --quality first",
+                                     layout.sample().string(), formatNumber(start.info.particleRadius),
+                                     formatNumber(scene.particleRadius), scene.quality.str()));
+    std::size_t boundaryCount = 0;
+    for (const auto& b : start.boundaries) boundaryCount += b.x.size();
+    report.setCounts(start.fluid.size(), boundaryCount);
+
+    Simulation sim(scene, std::move(start.fluid), start.boundaries);
+    const FrameRange& fr = scene.frames;
+    auto writeFrame = [&](std::int64_t f) {
+        if (f < frames.first || f > frames.second) return;
+        writeParticleCache(layout.particles(f), sim.particles(), movingBodies(sim.boundary()),
+                           {scene.name, f, sim.time(), fr.fps, scene.particleRadius});
+        stage.outputs.push_back(layout.particles(f).string());
+    };
+    std::int64_t next = fr.start + 1;
+    if (from) {
+        try {
+            sim.restore(from->state);
+        } catch (const std::exception& e) {
+            throw InputError(fmt::format("--resume: the checkpoint of frame {} does not fit this scene and sample: "
+                                         "{}\n  fix: run without --resume to start over",
+                                         from->info.frame, e.what()));
+        }
+        next = from->info.frame + 1;
+    } else {
+        writeFrame(fr.start);
+    }
+
+    // SIGINT / SIGTERM stop the run between two steps, with a checkpoint of that moment.
+    const InterruptGuard guard;
+    const auto keepGoing = [] { return InterruptGuard::received() == 0; };
+    std::size_t checkpoints = 0;
+    Progress progress("simulate", std::size_t(std::max<std::int64_t>(0, frames.second - next + 1)));
+    for (std::int64_t f = next; f <= frames.second; ++f) {
+        if (!sim.advanceTo(fr.timeOf(f), keepGoing)) {
+            const int signal = InterruptGuard::received();
+            const fs::path saved = saveCheckpoint(scene, layout, sim, f - 1);
+            stage.status = "interrupted";
+            stage.seconds = clock.seconds();
+            stage.outputs.push_back(saved.string());
+            report.setSimulation(sim.stats(), sim.time(), sim.effectNames(), sim.particles().size());
+            report.write(layout.report());
+            throw Interrupted(signal,
+                              fmt::format("{} during frame {} (t = {:.4f} s); the state is saved in {}\n  continue: "
+                                          "run the same command with --resume",
+                                          strsignal(signal), f, sim.time(), saved.string()));
+        }
+        writeFrame(f);
+        if (scene.checkpointEvery > 0 && ((f - fr.start) % scene.checkpointEvery == 0 || f == frames.second)) {
+            stage.outputs.push_back(saveCheckpoint(scene, layout, sim, f).string());
+            ++checkpoints;
+        }
+        progress.update(std::size_t(f - next + 1));
+    }
+    progress.finish();
+    report.setSimulation(sim.stats(), sim.time(), sim.effectNames(), sim.particles().size());
+    report.setBodies(sim.boundary().names, sim.bodyReports());
+    report.setEmitters(sim.emitterReports());
+    stage.seconds = clock.seconds();
+    const SolverStats& s = sim.stats();
+    stage.note = fmt::format("{}{} steps to t = {:.3f} s, {} frames written, {} checkpoints{}",
+                             from ? fmt::format("resumed at frame {} (t = {:.4f} s); ", from->info.frame,
+                                                from->state.time)
+                                  : std::string(),
+                             s.steps, sim.time(), stage.outputs.size() - checkpoints, checkpoints,
+                             s.warningCount ? fmt::format(", {} warnings", s.warningCount) : std::string());
+}
+
+}  // namespace ganache
