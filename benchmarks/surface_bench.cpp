@@ -86,7 +86,7 @@ void surface(benchmark::State& state) {
     state.counters["triangles"] = double(triangles);
     state.counters["band_voxels"] = double(voxels);
     state.counters["peak_MB"] = (statusBytes("VmHWM") - before) / 1e6;
-    state.counters["estimate_MB"] = estimateSurfaceBytes(fluid, kRadius, settings) / 1e6;
+    state.counters["estimate_MB"] = estimateSurfaceBytes(fluid.size(), kRadius, settings) / 1e6;
 }
 
 }  // namespace

@@ -3,7 +3,7 @@
 # and builds ganache into build/ (Release).
 # Sourced by scripts/run.sh and scripts/test.sh; safe to run again: installed packages and the build are reused.
 # scripts/sanitize.sh and scripts/fuzz.sh build elsewhere: they set GANACHE_BUILD_DIR, GANACHE_CMAKE_ARGS (extra
-# configure arguments) and GANACHE_EXTRA_PACKAGES before sourcing it.
+# configure arguments), GANACHE_EXTRA_PACKAGES and GANACHE_BUILD_TARGETS (default: all) before sourcing it.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 
@@ -31,4 +31,5 @@ fi
 build_dir="${GANACHE_BUILD_DIR:-build}"
 # shellcheck disable=SC2086  # the extra arguments are meant to split
 cmake -S . -B "$build_dir" -DCMAKE_BUILD_TYPE=Release ${GANACHE_CMAKE_ARGS:-}
-cmake --build "$build_dir" --parallel "$(nproc)"
+# shellcheck disable=SC2086
+cmake --build "$build_dir" --parallel "$(nproc)" ${GANACHE_BUILD_TARGETS:+--target $GANACHE_BUILD_TARGETS}

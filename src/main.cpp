@@ -28,6 +28,8 @@ int main(int argc, char** argv) {
         c->add_option("--out", opt.out, "output folder (default: out/<scene name>)");
         c->add_option("--frames", opt.frames, "frame range A-B (or one frame A) within the scene's frames");
         c->add_option("--threads", opt.threads, "worker threads (default 0: every core)");
+        c->add_flag("--skip-resource-check", opt.skipResourceCheck,
+                    "run even when the memory or disk estimate printed at the start exceeds what the machine has");
     };
 
     struct Command {
@@ -62,8 +64,8 @@ int main(int argc, char** argv) {
                           "redo surface and render frames whose outputs are newer than their inputs");
     for (std::size_t i : {std::size_t(0), std::size_t(3)}) {
         subs[i]->add_option("--memory", opt.memoryGiB,
-                            "GiB the surface stage may plan for (default: what the machine, or its cgroup, has "
-                            "free); frames run in parallel as far as it allows")
+                            "GiB the run may plan for (default: 80 % of what the machine, or its cgroup, has "
+                            "free); the surface stage runs frames in parallel as far as it allows")
             ->check(CLI::PositiveNumber);
     }
     bool check = false;

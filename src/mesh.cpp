@@ -69,7 +69,8 @@ TriangleMesh readMeshFile(const std::filesystem::path& file) {
     // Points and lines carry no volume or surface: leave them out of the merged mesh.
     importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
     const aiScene* scene = importer.ReadFile(
-        file.string(), aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
+        file.string(), aiProcess_ValidateDataStructure | aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
+                           aiProcess_PreTransformVertices |
                            aiProcess_SortByPType);
     if (!scene)
         throw InputError(fmt::format("{}: cannot read a triangle mesh from it: {}\n  fix: give an OBJ, PLY, STL, OFF "

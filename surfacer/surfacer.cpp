@@ -424,18 +424,39 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSet
     return out;
 }
 
-double estimateSurfaceBytes(const ParticleSet& fluid, Real r, const SurfaceSettings& settings) {
+namespace {
+
+// Voxels of the final narrow band: twice that of a cube of the fluid's volume (splashes and sheets have more
+// surface than a compact puddle, where this overestimates the band 1.25x).
+Real bandVoxels(std::size_t particles, Real r, const SurfaceSettings& settings) {
+    const Real voxel = settings.voxelFraction * r;
+    const Real volume = Real(particles) * 8 * r * r * r;
+    return 2 * 6 * std::pow(volume, 2.0 / 3.0) * 2 * kHalfBand / (voxel * voxel);
+}
+
+}  // namespace
+
+double estimateSurfaceBytes(std::size_t particles, Real r, const SurfaceSettings& settings) {
     // Calibrated on surface_bench's puddles (200k and 1M particles, docs/benchmarks.md), where the measured peak
     // was 60-75 bytes per voxel of the final band (the band, its smoothing's copies, the mesh) plus, for
-    // anisotropic kernels, about 4.5 bytes per voxel of the kernel sum over the fluid's volume and its support.
-    // The band is taken as twice that of a cube of the fluid's volume (splashes and sheets have more surface
-    // than a compact puddle, where this overestimates the band 1.25x); 200 bytes a particle cover the cache and
-    // the per-particle kernels. Every estimate was above the measured peak (1.6-2.3x).
+    // anisotropic kernels, about 4.5 bytes per voxel of the kernel sum over the fluid's volume and its support;
+    // 200 bytes a particle cover the cache and the per-particle kernels. Every estimate was above the measured
+    // peak (1.6-2.3x).
     const Real voxel = settings.voxelFraction * r;
-    const Real volume = Real(fluid.size()) * 8 * r * r * r;
-    const Real bandVoxels = 2 * 6 * std::pow(volume, 2.0 / 3.0) * 2 * kHalfBand / (voxel * voxel);
+    const Real volume = Real(particles) * 8 * r * r * r;
     const Real fieldVoxels = settings.method == SurfaceMethod::Anisotropic ? 2 * volume / (voxel * voxel * voxel) : 0;
-    return 80 * bandVoxels + 5 * fieldVoxels + 200.0 * double(fluid.size());
+    return 80 * bandVoxels(particles, r, settings) + 5 * fieldVoxels + 200.0 * double(particles);
+}
+
+std::pair<double, double> estimateSurfaceFileBytes(std::size_t particles, Real r, const SurfaceSettings& settings) {
+    // A level-set voxel takes about 4 bytes in the file (float values, compressed topology); each extra grid
+    // about as much again. The mesh has about two triangles per surface voxel (the band's middle layer), each
+    // about 90 bytes of OBJ text with its share of the vertices and normals. On the default scene at preview
+    // (96 frames) these give 83 MiB of level sets and 624 MiB of meshes against 61 and 583 MiB written.
+    const Real band = bandVoxels(particles, r, settings);
+    const int grids = 1 + settings.densityGrid + settings.temperatureGrid + 3 * settings.velocityGrid;
+    const Real triangles = 2 * band / (2 * kHalfBand);
+    return {4.0 * grids * band, settings.mesh ? 90.0 * triangles : 0.0};
 }
 
 Real SurfaceMesh::volume() const {

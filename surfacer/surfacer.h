@@ -77,8 +77,13 @@ private:
 /// gives an empty level set and an empty mesh.
 FrameSurface surfaceParticles(const ParticleSet& fluid, Real particleRadius, const SurfaceSettings& settings);
 
-/// Bytes one frame is expected to need at most, from the particles' count and bounds (for the memory check).
-double estimateSurfaceBytes(const ParticleSet& fluid, Real particleRadius, const SurfaceSettings& settings);
+/// Bytes one frame of `particles` particles is expected to need at most (for the memory check).
+double estimateSurfaceBytes(std::size_t particles, Real particleRadius, const SurfaceSettings& settings);
+
+/// Rough sizes of one frame's files [bytes]: the level set (with the extra grids asked for) and the OBJ mesh (0
+/// without `mesh`). For the disk estimate printed before a run.
+std::pair<double, double> estimateSurfaceFileBytes(std::size_t particles, Real particleRadius,
+                                                   const SurfaceSettings& settings);
 
 /// Writes a Wavefront OBJ atomically: `v` and `vn` per vertex, faces `f v//vn`; with temperatures, each vertex
 /// also has a texture coordinate `vt T 0` carrying its temperature in C (faces `f v/vt/vn`), the one per-vertex

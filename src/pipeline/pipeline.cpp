@@ -67,21 +67,6 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
     m["mesh_cache"] = {{"hits", sample.cacheHits}, {"misses", sample.cacheMisses}};
 }
 
-// Memory this process can still get: the machine's MemAvailable, or less when a cgroup (v2: a farm's container
-// or job slot) caps it; infinity when neither can be read.
-double availableBytes() {
-    double free = std::numeric_limits<double>::infinity();
-    std::ifstream meminfo("/proc/meminfo");
-    std::string key, unit;
-    double kib = 0;
-    while (meminfo >> key >> kib >> unit)
-        if (key == "MemAvailable:") free = kib * 1024;
-    double limit = 0, used = 0;
-    std::ifstream max("/sys/fs/cgroup/memory.max"), current("/sys/fs/cgroup/memory.current");
-    if (max >> limit && current >> used) free = std::min(free, std::max(0.0, limit - used));  // "max": no limit
-    return free;
-}
-
 void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
                 bool force, int threads, double memoryGiB, RunReport& report) {
     StageRecord& stage = report.addStage("surface");
@@ -119,7 +104,7 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
     for (std::size_t start = 0; start < todo.size() && failure.empty(); start += batch) {
         // The batch's first frame sizes the batch, and is then surfaced from this same read.
         std::optional<CacheContents> first = readFrame(todo[start]);
-        const double need = estimateSurfaceBytes(first->fluid, scene.particleRadius, settings);
+        const double need = estimateSurfaceBytes(first->fluid.size(), scene.particleRadius, settings);
         // What frames may use: as much as --memory says, or 80 % of what is free (the rest for everything else).
         const double budget = memoryGiB > 0 ? memoryGiB * (1 << 30) : 0.8 * availableBytes();
         if (need > budget)
@@ -250,6 +235,7 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
     const OutputLayout layout{options.out.empty() ? std::filesystem::path("out") / scene.name : options.out,
                               scene.name};
     RunReport report(scene, threads);
+    checkResources(scene, layout, frames, stages, options.memoryGiB, options.skipResourceCheck, report);
     if (const std::size_t stale = removeStaleTemporaries(layout.root))
         fmt::print(stderr, "removed {} unfinished file(s) that a killed run left in {}\n", stale, layout.root.string());
     const bool simulates = std::find(stages.begin(), stages.end(), StageId::Simulate) != stages.end();

@@ -24,6 +24,7 @@ struct RunOptions {
     bool resume = false;
     bool force = false;                              ///< redo frames whose outputs are up to date
     double memoryGiB = 0;                            ///< memory a stage may plan for; 0: what is free
+    bool skipResourceCheck = false;                  ///< run even when the estimates exceed what the machine has
 };
 
 /// The inclusive frame range "A-B" (or "A") within the scene's frames; InputError when malformed or outside.

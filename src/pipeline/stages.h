@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <optional>
 #include <utility>
+#include <vector>
 
 namespace ganache {
 
@@ -17,6 +18,16 @@ bool upToDate(const std::filesystem::path& output, const std::filesystem::path& 
 /// Throws InputError naming the first frame of the range without a particle cache, before a stage does any work.
 void requireParticleCaches(const char* stage, const Scene& scene, const OutputLayout& layout,
                            std::pair<std::int64_t, std::int64_t> frames);
+
+/// Memory this process can still get [bytes]: the machine's MemAvailable, or less when a cgroup (v2: a farm's
+/// container or job slot) caps it; infinity when neither can be read.
+double availableBytes();
+
+/// The resource guard (resources.cpp): prints the memory and disk the stages will need, estimated from the scene,
+/// and refuses (SceneError at particles.radius for memory, InputError for disk, each naming what to change) when
+/// they exceed what the machine has, unless skipCheck. memoryGiB > 0 replaces the free memory (--memory).
+void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
+                    const std::vector<StageId>& stages, double memoryGiB, bool skipCheck, RunReport& report);
 
 /// The checkpoint `--resume` continues from: the newest in <out>/checkpoints that reads back whole (each one
 /// that does not is reported and skipped); none when there is none. InputError when it belongs to another

@@ -192,12 +192,15 @@ TEST(Reliability, AFullDiskStopsWithAClearErrorAndKeepsWhatWasWritten) {
     const fs::path small = dir / "small", kept = dir / "kept";
     fs::create_directories(small);
     const std::string ganache = std::string(GANACHE_EXE) + " run " + kScene + " --threads 2 --out " + small.string();
+    // First without --skip-resource-check: the guard sees the small disk and refuses before writing anything.
     std::ofstream(dir / "tmpfs.sh") << "mount -t tmpfs -o size=640k tmpfs '" << small.string() << "' || exit 99\n"
-                                    << ganache << "\necho exit=$?\ncp -a '" << small.string() << "/.' '"
-                                    << kept.string() << "'\n";
+                                    << ganache << "\necho guard=$?\nls -A '" << small.string() << "'\n"
+                                    << ganache << " --skip-resource-check\necho exit=$?\ncp -a '" << small.string()
+                                    << "/.' '" << kept.string() << "'\n";
     // The limit (in 512-byte blocks) lets the sample and frame 1 through and stops frame 2, which is larger.
     const std::size_t blocks = (referenceFrames()[0].size() + referenceFrames()[1].size()) / 2 / 512;
-    std::ofstream(dir / "ulimit.sh") << "trap '' XFSZ\nulimit -f " << blocks << "\n" << ganache << "\necho exit=$?\n";
+    std::ofstream(dir / "ulimit.sh") << "trap '' XFSZ\nulimit -f " << blocks << "\n" << ganache
+                                     << " --skip-resource-check\necho exit=$?\n";
     Result r = runShell("unshare -m --propagation private sh " + (dir / "tmpfs.sh").string());
     if (r.output.find("exit=") == std::string::npos) r = runShell("unshare -rm sh " + (dir / "tmpfs.sh").string());
     const bool tmpfs = r.output.find("exit=") != std::string::npos;
@@ -207,6 +210,10 @@ TEST(Reliability, AFullDiskStopsWithAClearErrorAndKeepsWhatWasWritten) {
         fs::rename(small, kept);
     }
     SCOPED_TRACE(tmpfs ? "tmpfs of 640 KiB" : "ulimit -f");
+    if (tmpfs) {
+        EXPECT_NE(r.output.find("error: the outputs need about"), std::string::npos) << r.output;
+        EXPECT_NE(r.output.find("guard=2\nplan:"), std::string::npos) << r.output;  // refused, nothing written
+    }
     EXPECT_NE(r.output.find("exit=1"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("error: cannot write"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find(tmpfs ? "is full" : "ulimit -f"), std::string::npos) << r.output;
@@ -219,4 +226,17 @@ TEST(Reliability, AFullDiskStopsWithAClearErrorAndKeepsWhatWasWritten) {
         EXPECT_TRUE(readBytes(frame(kept, f)) == referenceFrames()[std::size_t(f - kFirst)]) << f;
     EXPECT_FALSE(fs::exists(frame(kept, kLast)));
     for (const auto& e : fs::recursive_directory_iterator(kept)) EXPECT_FALSE(isTemporary(e.path())) << e.path();
+}
+
+TEST(Reliability, TheResourceGuardPrintsItsEstimateAndRefusesWhatCannotFit) {
+    const fs::path out = freshDir("reliability_guard");
+    Result r = runGanache("run " + kScene + " --memory 0.05 --out " + out.string());
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_NE(r.output.find("plan: about"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("resume.yaml:6:"), std::string::npos) << r.output;  // particles.radius
+    EXPECT_NE(r.output.find("more than the 51.2 MiB --memory allows"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("fix: raise particles.radius"), std::string::npos) << r.output;
+    EXPECT_TRUE(fs::is_empty(out));
+    r = runGanache("run " + kScene + " --memory 0.05 --skip-resource-check --frames 1-2 --out " + out.string());
+    EXPECT_EQ(r.code, 0) << r.output;
 }

@@ -1,0 +1,165 @@
+// The resource guard: the memory and disk a command will need, estimated from the scene before anything starts,
+// printed, and compared with what the machine has. A run that cannot fit is refused up front, naming the setting
+// to change, instead of dying hours in (out of memory) or filling the disk at frame 900.
+
+#include "stages.h"
+
+#include "errors.h"
+#include "surfacer.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+
+#include <sys/statvfs.h>
+
+namespace ganache {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr double kGiB = 1 << 30;
+
+// What the program needs before any particle: its libraries, OpenVDB, TBB (`ganache scene` peaks at 88 MiB).
+constexpr double kProgramBytes = 100 * double(1 << 20);
+// Simulation memory per particle: a fluid particle's attributes, neighbour lists and solver vectors, and a
+// boundary particle's arrays, grid and share of the cache it is read from. Measured: 155 MiB peak for 25,428 fluid
+// and 94,580 boundary particles (tests/scenes/resume.yaml at --quality 0.2), which these put at 171 MiB.
+constexpr double kFluidBytes = 1024, kBoundaryBytes = 512;
+// The render stage's two llvmpipe contexts with their multisampled buffers and shadow maps.
+constexpr double kRenderBytes = 250 * double(1 << 20);
+// File sizes per particle: a particle cache holds 32-bit positions and velocities, 64-bit mass and id and 32-bit
+// effect attributes (about 60 bytes a fluid particle, 35 a boundary particle with the OpenVDB overhead, measured on
+// tests/scenes/resume.yaml; the default scene's 96 frames: 16 MiB estimated, 12 MiB written); a checkpoint holds
+// every attribute in 64 bits (about 150 bytes).
+constexpr double kFluidCacheBytes = 60, kBoundaryCacheBytes = 35, kCheckpointBytes = 150;
+
+// Boundary particles the sampler puts on the scene's boundaries: one layer, r apart, over their surfaces within
+// the domain (tests/scenes/resume.yaml: 3,750 estimated, 3,920 sampled).
+double estimateBoundaryParticles(const Scene& scene) {
+    const Vec3 extent = scene.domainMax - scene.domainMin;
+    double area = 0;
+    for (const auto& b : scene.boundaries) {
+        if (const auto* box = std::get_if<BoxBoundary>(&b.shape)) {
+            const Vec3 e = (box->max.cwiseMin(scene.domainMax) - box->min.cwiseMax(scene.domainMin)).cwiseMax(0);
+            area += 2 * (e.x() * e.y() + e.y() * e.z() + e.z() * e.x());
+        } else if (const auto* plane = std::get_if<PlaneBoundary>(&b.shape)) {
+            const Vec3 n = plane->normal.cwiseAbs();  // the domain's cross-section across the plane
+            area += n.x() * extent.y() * extent.z() + n.y() * extent.x() * extent.z() + n.z() * extent.x() * extent.y();
+        } else {
+            area += std::get<MeshShape>(b.shape).mesh->area();
+        }
+    }
+    return area / (scene.particleRadius * scene.particleRadius);
+}
+
+// Free bytes on the file system that will hold `folder` (its nearest existing parent).
+double freeDiskBytes(fs::path folder) {
+    std::error_code ec;
+    folder = fs::absolute(folder, ec);
+    while (!folder.empty() && !fs::exists(folder, ec) && folder != folder.parent_path()) folder = folder.parent_path();
+    struct statvfs disk {};
+    if (::statvfs(folder.c_str(), &disk) != 0) return std::numeric_limits<double>::infinity();
+    return double(disk.f_bavail) * double(disk.f_frsize);
+}
+
+// Bytes of the files already under `folder`: a rerun replaces them, so their space counts as available.
+double existingBytes(const fs::path& folder) {
+    double total = 0;
+    std::error_code ec;
+    for (auto it = fs::recursive_directory_iterator(folder, ec); !ec && it != fs::recursive_directory_iterator();
+         it.increment(ec))
+        if (it->is_regular_file(ec)) total += double(it->file_size(ec));
+    return total;
+}
+
+std::string size(double bytes) {
+    return bytes >= kGiB ? fmt::format("{:.1f} GiB", bytes / kGiB) : fmt::format("{:.1f} MiB", bytes / (1 << 20));
+}
+
+bool has(const std::vector<StageId>& stages, StageId id) {
+    return std::find(stages.begin(), stages.end(), id) != stages.end();
+}
+
+}  // namespace
+
+double availableBytes() {
+    double free = std::numeric_limits<double>::infinity();
+    std::ifstream meminfo("/proc/meminfo");
+    std::string key, unit;
+    double kib = 0;
+    while (meminfo >> key >> kib >> unit)
+        if (key == "MemAvailable:") free = kib * 1024;
+    double limit = 0, used = 0;
+    std::ifstream max("/sys/fs/cgroup/memory.max"), current("/sys/fs/cgroup/memory.current");
+    if (max >> limit && current >> used) free = std::min(free, std::max(0.0, limit - used));  // "max": no limit
+    return free;
+}
+
+void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
+                    const std::vector<StageId>& stages, double memoryGiB, bool skipCheck, RunReport& report) {
+    const double fluid = estimateFluidParticles(scene, scene.particleRadius);
+    const double boundary = estimateBoundaryParticles(scene);
+    const double written = double(frames.second - frames.first + 1);
+    const bool surface = has(stages, StageId::Surface) && scene.surface.requested;
+    const bool render = has(stages, StageId::Render) && scene.render.requested;
+    bool moving = false;
+    for (const auto& b : scene.boundaries) moving |= !b.motion.isStatic();
+
+    // Memory: the largest stage (they run one after the other).
+    double memory = kProgramBytes;
+    if (has(stages, StageId::Sample) || has(stages, StageId::Simulate))
+        memory += kFluidBytes * fluid + kBoundaryBytes * boundary;
+    const double surfaceFrame = surface ? estimateSurfaceBytes(std::size_t(fluid), scene.particleRadius, scene.surface) : 0;
+    memory = std::max(memory, kProgramBytes + surfaceFrame);
+    if (render) memory = std::max(memory, kProgramBytes + kRenderBytes + kFluidBytes * fluid);
+
+    // Disk: what each stage writes.
+    const double sample = has(stages, StageId::Sample) ? kFluidCacheBytes * fluid + kBoundaryCacheBytes * boundary : 0;
+    double particles = 0, checkpoints = 0, levelSets = 0, meshes = 0, previews = 0;
+    if (has(stages, StageId::Simulate)) {
+        particles = written * (kFluidCacheBytes * fluid + (moving ? kBoundaryCacheBytes * boundary : 0));
+        if (scene.checkpointEvery > 0) checkpoints = double(scene.checkpointsKept + 1) * kCheckpointBytes * fluid;
+    }
+    if (surface) {
+        const auto [vdb, obj] = estimateSurfaceFileBytes(std::size_t(fluid), scene.particleRadius, scene.surface);
+        levelSets = written * vdb;
+        meshes = written * obj;
+    }
+    if (render)  // PNG previews compress to about 4 % of their pixels' bytes (default scene: 9.9 MiB for 96 frames)
+        previews = (written + 1) * 0.06 * 3 * double(scene.render.width * scene.render.height);
+    const double disk = sample + particles + checkpoints + levelSets + meshes + previews;
+
+    const double memoryBudget = memoryGiB > 0 ? memoryGiB * kGiB : 0.8 * availableBytes();
+    const double diskFree = freeDiskBytes(layout.root) + existingBytes(layout.root);
+    fmt::print(stderr,
+               "plan: about {:.0f} fluid and {:.0f} boundary particles; memory about {} of {} {}; disk about {} "
+               "(particles {}, checkpoints {}, level sets {}, meshes {}, previews {}) of {} free in {}\n",
+               fluid, boundary, size(memory), size(memoryBudget), memoryGiB > 0 ? "(--memory)" : "usable", size(disk),
+               size(sample + particles), size(checkpoints), size(levelSets), size(meshes), size(previews),
+               size(diskFree), layout.root.string());
+    report.measurements()["plan"] = {{"fluid_particles", fluid},   {"boundary_particles", boundary},
+                                     {"memory_bytes", memory},     {"memory_budget_bytes", memoryBudget},
+                                     {"disk_bytes", disk},         {"disk_free_bytes", diskFree}};
+    if (skipCheck) return;
+    if (memory > memoryBudget)
+        throw SceneError(scene.radiusAt,
+                         fmt::format("this run needs about {} of memory at particle radius {} m ({} quality, "
+                                     "about {:.0f} particles), more than the {} {}",
+                                     size(memory), formatNumber(scene.particleRadius), scene.quality.str(),
+                                     fluid + boundary, size(memoryBudget),
+                                     memoryGiB > 0 ? "--memory allows" : "it may use of what this machine has free"),
+                         "raise particles.radius or use a coarser --quality (memory grows as 1 / radius^3), run on a "
+                         "machine with more memory, or pass --skip-resource-check if the estimate is wrong");
+    if (disk > diskFree)
+        throw InputError(fmt::format(
+            "the outputs need about {} of disk, but {} has {} free\n  fix: free space there, write "
+            "elsewhere with --out, run fewer frames (--frames), keep fewer checkpoints (simulation.checkpoints_kept), "
+            "drop the meshes (surface.mesh: false), or pass --skip-resource-check if the estimate is wrong",
+            size(disk), layout.root.string(), size(diskFree)));
+}
+
+}  // namespace ganache
