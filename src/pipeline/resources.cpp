@@ -109,13 +109,24 @@ void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<st
     bool moving = false;
     for (const auto& b : scene.boundaries) moving |= !b.motion.isStatic();
 
-    // Memory: the largest stage (they run one after the other).
-    double memory = kProgramBytes;
+    // Memory the scene's data needs on top of the program, in the largest stage (they run one after the other).
+    // This is what is compared with the free memory (which the running program is already not part of) or
+    // --memory, as the surface stage does for each frame.
+    double memory = 0;
+    std::string heaviest, fix;
+    Location at = scene.radiusAt;
+    auto consider = [&](double bytes, const char* stage, const Location& where, const char* remedy) {
+        if (bytes > memory) memory = bytes, heaviest = stage, at = where, fix = remedy;
+    };
     if (has(stages, StageId::Sample) || has(stages, StageId::Simulate))
-        memory += kFluidBytes * fluid + kBoundaryBytes * boundary;
-    const double surfaceFrame = surface ? estimateSurfaceBytes(std::size_t(fluid), scene.particleRadius, scene.surface) : 0;
-    memory = std::max(memory, kProgramBytes + surfaceFrame);
-    if (render) memory = std::max(memory, kProgramBytes + kRenderBytes + kFluidBytes * fluid);
+        consider(kFluidBytes * fluid + kBoundaryBytes * boundary, "simulate", scene.radiusAt,
+                 "raise particles.radius or use a coarser --quality (memory grows as 1 / radius^3)");
+    if (surface)
+        consider(estimateSurfaceBytes(std::size_t(fluid), scene.particleRadius, scene.surface), "surface",
+                 scene.surface.at, "raise surface.voxel_size, or particles.radius (a coarser --quality)");
+    if (render)
+        consider(kRenderBytes + kFluidBytes * fluid, "render", scene.render.at,
+                 "render on another machine (`ganache render`)");
 
     // Disk: what each stage writes.
     const double sample = has(stages, StageId::Sample) ? kFluidCacheBytes * fluid + kBoundaryCacheBytes * boundary : 0;
@@ -136,24 +147,26 @@ void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<st
     const double memoryBudget = memoryGiB > 0 ? memoryGiB * kGiB : 0.8 * availableBytes();
     const double diskFree = freeDiskBytes(layout.root) + existingBytes(layout.root);
     fmt::print(stderr,
-               "plan: about {:.0f} fluid and {:.0f} boundary particles; memory about {} of {} {}; disk about {} "
-               "(particles {}, checkpoints {}, level sets {}, meshes {}, previews {}) of {} free in {}\n",
-               fluid, boundary, size(memory), size(memoryBudget), memoryGiB > 0 ? "(--memory)" : "usable", size(disk),
+               "plan: about {:.0f} fluid and {:.0f} boundary particles; memory about {} (the program's {} and {} for the "
+               "scene) of {} {}; disk about {} (particles {}, checkpoints {}, level sets {}, meshes {}, previews {}) of "
+               "{} free in {}\n",
+               fluid, boundary, size(kProgramBytes + memory), size(kProgramBytes), size(memory), size(memoryBudget), memoryGiB > 0 ? "(--memory)" : "usable", size(disk),
                size(sample + particles), size(checkpoints), size(levelSets), size(meshes), size(previews),
                size(diskFree), layout.root.string());
     report.measurements()["plan"] = {{"fluid_particles", fluid},   {"boundary_particles", boundary},
-                                     {"memory_bytes", memory},     {"memory_budget_bytes", memoryBudget},
+                                     {"memory_bytes", kProgramBytes + memory},
+                                     {"memory_budget_bytes", memoryBudget},
                                      {"disk_bytes", disk},         {"disk_free_bytes", diskFree}};
     if (skipCheck) return;
     if (memory > memoryBudget)
-        throw SceneError(scene.radiusAt,
-                         fmt::format("this run needs about {} of memory at particle radius {} m ({} quality, "
-                                     "about {:.0f} particles), more than the {} {}",
-                                     size(memory), formatNumber(scene.particleRadius), scene.quality.str(),
+        throw SceneError(at,
+                         fmt::format("the {} stage needs about {} of memory for this scene at particle radius {} m ({} "
+                                     "quality, about {:.0f} particles), more than the {} {}",
+                                     heaviest, size(memory), formatNumber(scene.particleRadius), scene.quality.str(),
                                      fluid + boundary, size(memoryBudget),
                                      memoryGiB > 0 ? "--memory allows" : "it may use of what this machine has free"),
-                         "raise particles.radius or use a coarser --quality (memory grows as 1 / radius^3), run on a "
-                         "machine with more memory, or pass --skip-resource-check if the estimate is wrong");
+                         fix + ", run on a machine with more memory, or pass --skip-resource-check if the estimate is "
+                               "wrong");
     if (disk > diskFree)
         throw InputError(fmt::format(
             "the outputs need about {} of disk, but {} has {} free\n  fix: free space there, write "

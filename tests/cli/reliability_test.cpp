@@ -230,13 +230,13 @@ TEST(Reliability, AFullDiskStopsWithAClearErrorAndKeepsWhatWasWritten) {
 
 TEST(Reliability, TheResourceGuardPrintsItsEstimateAndRefusesWhatCannotFit) {
     const fs::path out = freshDir("reliability_guard");
-    Result r = runGanache("run " + kScene + " --memory 0.05 --out " + out.string());
+    Result r = runGanache("run " + kScene + " --memory 0.001 --out " + out.string());
     EXPECT_EQ(r.code, 2) << r.output;
     EXPECT_NE(r.output.find("plan: about"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("resume.yaml:6:"), std::string::npos) << r.output;  // particles.radius
-    EXPECT_NE(r.output.find("more than the 51.2 MiB --memory allows"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("more than the 1.0 MiB --memory allows"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("fix: raise particles.radius"), std::string::npos) << r.output;
     EXPECT_TRUE(fs::is_empty(out));
-    r = runGanache("run " + kScene + " --memory 0.05 --skip-resource-check --frames 1-2 --out " + out.string());
+    r = runGanache("run " + kScene + " --memory 0.001 --skip-resource-check --frames 1-2 --out " + out.string());
     EXPECT_EQ(r.code, 0) << r.output;
 }
