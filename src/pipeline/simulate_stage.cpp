@@ -146,6 +146,7 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     const InterruptGuard guard;
     const auto keepGoing = [] { return InterruptGuard::received() == 0; };
     std::size_t checkpoints = 0;
+    double checkpointSeconds = 0;
     Progress progress("simulate", std::size_t(std::max<std::int64_t>(0, frames.second - next + 1)));
     for (std::int64_t f = next; f <= frames.second; ++f) {
         if (!sim.advanceTo(fr.timeOf(f), keepGoing)) {
@@ -163,6 +164,7 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
         }
         writeFrame(f);
         if (scene.checkpointEvery > 0 && ((f - fr.start) % scene.checkpointEvery == 0 || f == frames.second)) {
+            const ScopedTimer timer(checkpointSeconds);
             stage.outputs.push_back(saveCheckpoint(scene, layout, sim, f).string());
             ++checkpoints;
         }
@@ -174,11 +176,12 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     report.setEmitters(sim.emitterReports());
     stage.seconds = clock.seconds();
     const SolverStats& s = sim.stats();
-    stage.note = fmt::format("{}{} steps to t = {:.3f} s, {} frames written, {} checkpoints{}",
+    report.measurements()["checkpoints"] = {{"written", checkpoints}, {"seconds", checkpointSeconds}};
+    stage.note = fmt::format("{}{} steps to t = {:.3f} s, {} frames written, {} checkpoints ({:.2f} s){}",
                              from ? fmt::format("resumed at frame {} (t = {:.4f} s); ", from->info.frame,
                                                 from->state.time)
                                   : std::string(),
-                             s.steps, sim.time(), stage.outputs.size() - checkpoints, checkpoints,
+                             s.steps, sim.time(), stage.outputs.size() - checkpoints, checkpoints, checkpointSeconds,
                              s.warningCount ? fmt::format(", {} warnings", s.warningCount) : std::string());
 }
 
