@@ -22,9 +22,11 @@ std::vector<std::uint8_t> insideByLevelSet(const TriangleMesh& mesh, const std::
 
     std::vector<std::uint8_t> inside(points.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 4096), [&](const auto& range) {
-        // Accessors cache tree nodes and are not shared between threads.
+        // Accessors cache tree nodes and are not shared between threads. The sampler keeps a reference to the
+        // accessor, so it must be a named object that outlives it (a temporary dangled: AddressSanitizer).
+        const openvdb::FloatGrid::ConstAccessor accessor = grid->getConstAccessor();
         const openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(
-            grid->getConstAccessor(), grid->transform());
+            accessor, grid->transform());
         for (std::size_t i = range.begin(); i != range.end(); ++i) {
             const Vec3& p = points[i];
             inside[i] = sampler.wsSample(openvdb::Vec3d(p.x(), p.y(), p.z())) < 0;

@@ -7,7 +7,7 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 GANACHE_BUILD_DIR=build-asan
 GANACHE_CMAKE_ARGS="-DCMAKE_BUILD_TYPE=RelWithDebInfo -DGANACHE_BUILD_BENCHMARKS=OFF -DGANACHE_SANITIZE=ON"
 source scripts/setup.sh
-export ASAN_OPTIONS="detect_leaks=1:abort_on_error=0:strict_string_checks=1:detect_stack_use_after_return=1"
+export ASAN_OPTIONS="detect_leaks=1:strict_string_checks=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 # Leaks inside the system's OpenGL driver (Mesa's llvmpipe) are not ganache's; everything else must be clean.
 export LSAN_OPTIONS="suppressions=$PWD/scripts/lsan.supp:print_suppressions=0"
