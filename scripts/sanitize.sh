@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The whole test suite under AddressSanitizer (with LeakSanitizer) and UndefinedBehaviorSanitizer, built with g++
 # into build-asan/. Any report fails the test it happens in; exits non-zero on any failure.
-# About 25 minutes to build and 6 minutes to test on 2 cores (the programs run 2-3x slower than in Release).
+# About 30 minutes to build and 33 minutes to test on 2 cores (the programs run about 10x slower than in Release).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 GANACHE_BUILD_DIR=build-asan
