@@ -55,18 +55,32 @@ std::string checksumFooter(std::string_view payload) {
     return footer;
 }
 
-bool checksumFooterMatches(std::string_view bytes, std::string& why) {
-    if (bytes.size() < kFooterSize || std::memcmp(bytes.data() + bytes.size() - kFooterSize, kMagic, 8) != 0) {
+namespace {
+
+// Reads a footer; false with `why` set when it is missing or does not fit a file of `size` bytes.
+bool readFooter(const unsigned char* footer, std::uint64_t size, std::uint64_t& length, std::uint64_t& hash,
+                std::string& why) {
+    if (size < kFooterSize || std::memcmp(footer, kMagic, 8) != 0) {
         why = "has no ganache checksum footer (truncated, or not written by ganache)";
         return false;
     }
-    std::uint64_t length, hash;
-    std::memcpy(&length, bytes.data() + bytes.size() - 16, 8);
-    std::memcpy(&hash, bytes.data() + bytes.size() - 8, 8);
-    if (length != bytes.size() - kFooterSize) {
+    std::memcpy(&length, footer + 8, 8);
+    std::memcpy(&hash, footer + 16, 8);
+    if (length != size - kFooterSize) {
         why = "has the wrong length for its checksum footer (truncated or extended)";
         return false;
     }
+    return true;
+}
+
+}  // namespace
+
+bool checksumFooterMatches(std::string_view bytes, std::string& why) {
+    std::uint64_t length = 0, hash = 0;
+    const auto* footer = bytes.size() < kFooterSize
+                             ? nullptr
+                             : reinterpret_cast<const unsigned char*>(bytes.data()) + bytes.size() - kFooterSize;
+    if (!readFooter(footer, bytes.size(), length, hash, why)) return false;
     if (fnv1a64(bytes.data(), length) != hash) {
         why = "fails its checksum (corrupt)";
         return false;
@@ -83,18 +97,10 @@ bool verifyChecksumFooter(const std::filesystem::path& file, std::string& why) {
     std::fseek(f.f, 0, SEEK_END);
     const long size = std::ftell(f.f);
     std::array<unsigned char, kFooterSize> footer{};
-    if (size < long(kFooterSize) || std::fseek(f.f, size - long(kFooterSize), SEEK_SET) != 0 ||
-        std::fread(footer.data(), 1, kFooterSize, f.f) != kFooterSize || std::memcmp(footer.data(), kMagic, 8) != 0) {
-        why = "has no ganache checksum footer (truncated, or not written by ganache)";
-        return false;
-    }
-    std::uint64_t length, hash;
-    std::memcpy(&length, footer.data() + 8, 8);
-    std::memcpy(&hash, footer.data() + 16, 8);
-    if (length != std::uint64_t(size) - kFooterSize) {
-        why = "has the wrong length for its checksum footer";
-        return false;
-    }
+    const bool read = size >= long(kFooterSize) && std::fseek(f.f, size - long(kFooterSize), SEEK_SET) == 0 &&
+                      std::fread(footer.data(), 1, kFooterSize, f.f) == kFooterSize;
+    std::uint64_t length = 0, hash = 0;
+    if (!readFooter(footer.data(), read ? std::uint64_t(size) : 0, length, hash, why)) return false;
     if (hashPrefix(f.f, length) != hash) {
         why = "fails its checksum (corrupt)";
         return false;
