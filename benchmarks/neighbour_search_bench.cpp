@@ -2,9 +2,9 @@
 // and 2 threads, with particles in Z order (as the simulator keeps them) and shuffled (no reordering).
 // Run: build/benchmarks/neighbour_search_bench --benchmark_counters_tabular=true
 
-#include "kernels.h"
-#include "neighbour_search.h"
-#include "particles.h"
+#include "core/kernels.h"
+#include "core/neighbour_search.h"
+#include "core/particles.h"
 
 #include <benchmark/benchmark.h>
 #include <tbb/global_control.h>

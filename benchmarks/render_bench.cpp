@@ -3,7 +3,7 @@
 // llvmpipe draws with as many threads as LP_NUM_THREADS says (default: every core); run e.g.
 //   LP_NUM_THREADS=2 build/benchmarks/render_bench --benchmark_counters_tabular=true
 
-#include "render.h"
+#include "render/render.h"
 
 #include <benchmark/benchmark.h>
 

@@ -3,8 +3,8 @@
 // the initial density check; the mesh is read and repaired once, outside the timing.
 // Run: build/benchmarks/sample_bench --benchmark_counters_tabular=true
 
-#include "sampler.h"
-#include "scene.h"
+#include "sampler/sampler.h"
+#include "scene/scene.h"
 
 #include <benchmark/benchmark.h>
 #include <fmt/format.h>

@@ -7,7 +7,7 @@
 // Run one benchmark per process for honest memory peaks, e.g.
 //   build/benchmarks/surface_bench --benchmark_counters_tabular=true --benchmark_filter='surface/2/200000/2'
 
-#include "surfacer.h"
+#include "surfacer/surfacer.h"
 
 #include <benchmark/benchmark.h>
 #include <tbb/global_control.h>

@@ -2,7 +2,7 @@
 // a multisampled colour pass (sky, ground, meshes, particles as sphere sprites), read back into an Image.
 
 #define GL_GLEXT_PROTOTYPES 1
-#include "render.h"
+#include "render/render.h"
 
 #include <GL/osmesa.h>
 #include <GL/gl.h>

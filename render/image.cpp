@@ -1,10 +1,10 @@
 // Everything of the renderer that is not OpenGL: PNG files, the colour ramp, camera framing, flat meshes, the
 // pixel font, the legend and the contact sheet.
 
-#include "render.h"
+#include "render/render.h"
 
-#include "atomic_file.h"
-#include "errors.h"
+#include "io/atomic_file.h"
+#include "core/errors.h"
 
 #include <fmt/format.h>
 #include <png.h>

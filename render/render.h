@@ -4,7 +4,7 @@
 // plane) into an Image: a soft key light with shadows (a shadow map, which also gives the contact shadow on the
 // ground), a cool fill light, sky ambient, 4x multisampling. Images are deterministic for the same input.
 
-#include "types.h"
+#include "core/types.h"
 
 #include <array>
 #include <cstdint>
@@ -106,27 +106,6 @@ void fillRect(Image& image, int x0, int y0, int x1, int y1, const Vec3& colour);
 void drawText(Image& image, int x, int y, const std::string& text, const Vec3& colour, int scale = 2);
 /// Draws the legend's colour bar, ticks and title in the image's lower right corner.
 void drawLegend(Image& image, const Legend& legend);
-
-/// One line of a chart: points joined in the order given, each with an optional label.
-struct ChartSeries {
-    std::string label;
-    std::vector<std::pair<Real, Real>> points;  ///< (x, y), both > 0 on logarithmic axes
-    std::vector<std::string> pointLabels;       ///< empty, or one per point
-    Vec3 colour = Vec3(0.2, 0.2, 0.2);
-};
-
-struct Chart {
-    std::string title, xLabel, yLabel;
-    std::vector<ChartSeries> series;
-    int width = 1200, height = 800;
-};
-
-/// A chart with logarithmic axes spanning whole decades around every point, a grid at each decade, the series
-/// as lines with square markers, and a legend. Points that are not finite and positive are left out.
-Image logLogChart(const Chart& chart);
-
-/// Distinct colours for chart series, by index.
-Vec3 seriesColour(std::size_t index);
 
 /// Frames side by side, scaled down to `columns` across, each labelled with its caption; rows as needed.
 Image contactSheet(const std::vector<Image>& frames, const std::vector<std::string>& captions, int columns,

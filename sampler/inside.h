@@ -2,8 +2,8 @@
 // Inside/outside tests for triangle meshes: what the sampler uses to fill a mesh with fluid and to carve fluid
 // out of closed solids.
 
-#include "mesh.h"
-#include "scene.h"
+#include "geometry/mesh.h"
+#include "scene/scene.h"
 
 #include <cstdint>
 #include <memory>

@@ -1,5 +1,5 @@
 // The only sampler file that includes OpenVDB (its headers are slow to compile).
-#include "inside.h"
+#include "sampler/inside.h"
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Interpolation.h>

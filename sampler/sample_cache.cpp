@@ -1,7 +1,7 @@
-#include "sample_cache.h"
+#include "sampler/sample_cache.h"
 
-#include "atomic_file.h"
-#include "checksum.h"
+#include "io/atomic_file.h"
+#include "io/checksum.h"
 
 #include <fmt/format.h>
 

@@ -2,7 +2,7 @@
 // The sampler's cache: the points sampled from one mesh input (the sites inside a fluid mesh, the surface of a
 // boundary mesh), keyed by the placed mesh's content and the sampling parameters, so a re-run skips the work.
 
-#include "mesh.h"
+#include "geometry/mesh.h"
 
 #include <cstdint>
 #include <filesystem>

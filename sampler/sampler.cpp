@@ -1,11 +1,11 @@
-#include "sampler.h"
+#include "sampler/sampler.h"
 
-#include "kernels.h"
-#include "neighbour_search.h"
-#include "parallel.h"
-#include "progress.h"
+#include "core/kernels.h"
+#include "core/neighbour_search.h"
+#include "core/parallel.h"
+#include "app/progress.h"
 
-#include "inside.h"
+#include "sampler/inside.h"
 
 #include <cmath>
 #include <unordered_map>

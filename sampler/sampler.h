@@ -1,10 +1,10 @@
 #pragma once
 // The sample stage: a scene's fluid shapes become lattice particles and its solids become boundary particles.
 
-#include "kernels.h"
-#include "particles.h"
-#include "sample_cache.h"
-#include "scene.h"
+#include "core/kernels.h"
+#include "core/particles.h"
+#include "sampler/sample_cache.h"
+#include "scene/scene.h"
 
 #include <string>
 #include <vector>

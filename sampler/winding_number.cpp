@@ -1,6 +1,6 @@
-#include "inside.h"
+#include "sampler/inside.h"
 
-#include "parallel.h"
+#include "core/parallel.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,9 +1,9 @@
 // OBJ files of surface meshes: written by the surface stage, read back by the render stage. OpenVDB-free.
 
-#include "surfacer.h"
+#include "surfacer/surfacer.h"
 
-#include "atomic_file.h"
-#include "errors.h"
+#include "io/atomic_file.h"
+#include "core/errors.h"
 
 #include <fmt/format.h>
 

@@ -1,10 +1,10 @@
-#include "surfacer.h"
+#include "surfacer/surfacer.h"
 
-#include "vdb_file.h"
-#include "kernels.h"
-#include "neighbour_search.h"
-#include "parallel.h"
-#include "report.h"
+#include "io/vdb_file.h"
+#include "core/kernels.h"
+#include "core/neighbour_search.h"
+#include "core/parallel.h"
+#include "app/report.h"
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>

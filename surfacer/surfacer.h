@@ -13,8 +13,8 @@
 //    of beading; the surface is where the kernel sum falls to half its value inside a lattice of spacing 2 r.
 // Then mean-curvature smoothing (OpenVDB LevelSetFilter), and meshing (OpenVDB VolumeToMesh).
 
-#include "particles.h"
-#include "scene.h"
+#include "core/particles.h"
+#include "scene/scene.h"
 
 #include <array>
 #include <filesystem>

@@ -1,14 +1,14 @@
-#include "pipeline.h"
-#include "stages.h"
+#include "pipeline/pipeline.h"
+#include "pipeline/stages.h"
 
-#include "atomic_file.h"
-#include "cache.h"
-#include "errors.h"
-#include "progress.h"
-#include "report.h"
-#include "sampler.h"
-#include "step.h"
-#include "surfacer.h"
+#include "io/atomic_file.h"
+#include "io/particle_cache.h"
+#include "core/errors.h"
+#include "app/progress.h"
+#include "app/report.h"
+#include "sampler/sampler.h"
+#include "physics/simulation.h"
+#include "surfacer/surfacer.h"
 
 #include <fmt/format.h>
 #include <tbb/global_control.h>

@@ -2,7 +2,7 @@
 // The stages of a ganache run and the commands that drive them: sample -> simulate -> surface -> render.
 // Each stage reads the files the previous one wrote, so any stage can be rerun on its own.
 
-#include "scene.h"
+#include "scene/scene.h"
 
 #include <filesystem>
 #include <optional>

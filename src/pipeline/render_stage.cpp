@@ -1,14 +1,14 @@
 // The render stage: preview/<scene>.NNNN.png per frame (the surface mesh, or the particles), a contact sheet and,
 // when ffmpeg is installed, an MP4.
 
-#include "stages.h"
+#include "pipeline/stages.h"
 
-#include "atomic_file.h"
-#include "cache.h"
-#include "errors.h"
-#include "progress.h"
-#include "render.h"
-#include "surfacer.h"
+#include "io/atomic_file.h"
+#include "io/particle_cache.h"
+#include "core/errors.h"
+#include "app/progress.h"
+#include "render/render.h"
+#include "surfacer/surfacer.h"
 
 #include <fmt/format.h>
 #include <tbb/enumerable_thread_specific.h>

@@ -2,10 +2,10 @@
 // printed, and compared with what the machine has. A run that cannot fit is refused up front, naming the setting
 // to change, instead of dying hours in (out of memory) or filling the disk at frame 900.
 
-#include "stages.h"
+#include "pipeline/stages.h"
 
-#include "errors.h"
-#include "surfacer.h"
+#include "core/errors.h"
+#include "surfacer/surfacer.h"
 
 #include <fmt/format.h>
 

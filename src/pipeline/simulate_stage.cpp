@@ -2,16 +2,16 @@
 // (simulation.checkpoint_every), on SIGINT / SIGTERM, and after the last frame; `--resume` continues from the
 // newest one that reads back whole.
 
-#include "pipeline.h"
-#include "stages.h"
+#include "pipeline/pipeline.h"
+#include "pipeline/stages.h"
 
-#include "cache.h"
-#include "checkpoint.h"
-#include "errors.h"
-#include "interrupt.h"
-#include "progress.h"
-#include "report.h"
-#include "step.h"
+#include "io/particle_cache.h"
+#include "io/checkpoint.h"
+#include "core/errors.h"
+#include "app/interrupt.h"
+#include "app/progress.h"
+#include "app/report.h"
+#include "physics/simulation.h"
 
 #include <fmt/format.h>
 

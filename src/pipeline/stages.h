@@ -1,9 +1,9 @@
 #pragma once
 // What the stages' source files share inside the pipeline library.
 
-#include "checkpoint.h"
-#include "pipeline.h"
-#include "report.h"
+#include "io/checkpoint.h"
+#include "pipeline/pipeline.h"
+#include "app/report.h"
 
 #include <filesystem>
 #include <optional>

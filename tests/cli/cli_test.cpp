@@ -1,9 +1,9 @@
 // Runs the real `ganache` program: exit codes, messages, outputs and report.json.
 
-#include "cache.h"
+#include "io/particle_cache.h"
 #include "cli_util.h"
 
-#include "render.h"
+#include "render/render.h"
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>

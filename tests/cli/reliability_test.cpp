@@ -3,8 +3,8 @@
 // file ever appears under an output's name. The scene (tests/scenes/resume.yaml) carries every kind of state a
 // checkpoint must hold: heat, per-particle viscosity, warm starts, an emitter, a turning paddle.
 
-#include "cache.h"
-#include "checkpoint.h"
+#include "io/particle_cache.h"
+#include "io/checkpoint.h"
 #include "cli_util.h"
 
 #include <gtest/gtest.h>

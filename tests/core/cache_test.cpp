@@ -1,6 +1,6 @@
-#include "cache.h"
+#include "io/particle_cache.h"
 
-#include "errors.h"
+#include "core/errors.h"
 
 #include <gtest/gtest.h>
 

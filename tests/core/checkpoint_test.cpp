@@ -1,6 +1,6 @@
 // Checkpoint files: every field comes back exactly, and a damaged file is refused with a reason, never read.
 
-#include "checkpoint.h"
+#include "io/checkpoint.h"
 
 #include <gtest/gtest.h>
 

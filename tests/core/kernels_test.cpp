@@ -1,4 +1,4 @@
-#include "kernels.h"
+#include "core/kernels.h"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "neighbour_search.h"
+#include "core/neighbour_search.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>

@@ -1,4 +1,4 @@
-#include "particles.h"
+#include "core/particles.h"
 
 #include <gtest/gtest.h>
 

@@ -1,9 +1,9 @@
 // Fuzz target: the mesh loader (assimp behind readMeshFile) and the mesh repair and check that follow it. The
 // first byte picks the format the rest is read as. A mesh or an InputError are the only allowed outcomes.
 
-#include "errors.h"
+#include "core/errors.h"
 #include "fuzz_input.h"
-#include "mesh.h"
+#include "geometry/mesh.h"
 
 #include <cstdio>
 #include <cstdlib>

@@ -1,9 +1,9 @@
 // Fuzz target: the scene loader. Any bytes as a scene file must give a scene or an InputError (the message with
 // file, line and column); anything else (another exception, a crash, a sanitizer report) is a finding.
 
-#include "errors.h"
+#include "core/errors.h"
 #include "fuzz_input.h"
-#include "scene.h"
+#include "scene/scene.h"
 
 #include <cstdio>
 #include <cstdlib>

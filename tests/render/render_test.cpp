@@ -1,6 +1,6 @@
-#include "render.h"
+#include "render/render.h"
 
-#include "errors.h"
+#include "core/errors.h"
 
 #include <gtest/gtest.h>
 

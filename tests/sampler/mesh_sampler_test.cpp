@@ -1,10 +1,10 @@
 // Meshes become particles: volumes against analytic and mesh volumes, meshes with holes and flipped faces,
 // placement, surfaces as boundaries, and a fluid that stays in its sampled box.
 
-#include "inside.h"
-#include "sampler.h"
-#include "shapes.h"
-#include "step.h"
+#include "sampler/inside.h"
+#include "sampler/sampler.h"
+#include "geometry/shapes.h"
+#include "physics/simulation.h"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 // Heat and melting against analytic results: conduction as the 3D heat kernel, conservation of heat,
 // radiation's exponential approach, the sources' fall-off, Reynolds' law, and which particles are surface.
 
-#include "heat.h"
+#include "physics/heat/heat.h"
 #include "solver_test_util.h"
 
 #include <gtest/gtest.h>

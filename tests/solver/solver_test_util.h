@@ -1,10 +1,10 @@
 #pragma once
 // Shared set-up for solver tests: scenes written to a temporary folder and sampled in memory.
 
-#include "sampler.h"
-#include "scene.h"
-#include "step.h"
-#include "viscosity.h"
+#include "sampler/sampler.h"
+#include "scene/scene.h"
+#include "physics/simulation.h"
+#include "physics/viscosity/viscosity.h"
 
 #include <filesystem>
 #include <fstream>

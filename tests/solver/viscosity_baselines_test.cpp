@@ -1,8 +1,8 @@
 // The two comparison methods (effects.viscosity.method: explicit, takahashi2015) against the main solver: what
 // each keeps, what each loses, and that the explicit one respects its stable step.
 
-#include "viscosity_explicit.h"
-#include "viscosity_takahashi2015.h"
+#include "physics/viscosity/viscosity_explicit.h"
+#include "physics/viscosity/viscosity_takahashi2015.h"
 
 #include "solver_test_util.h"
 

@@ -1,4 +1,4 @@
-#include "viscosity_weiler2018.h"
+#include "physics/viscosity/viscosity_weiler2018.h"
 
 #include "solver_test_util.h"
 

@@ -1,6 +1,6 @@
-#include "surfacer.h"
+#include "surfacer/surfacer.h"
 
-#include "scene.h"
+#include "scene/scene.h"
 
 #include <gtest/gtest.h>
 

@@ -1,0 +1,123 @@
+// ganache: the command line. Parses arguments, calls the pipeline, maps errors to exit codes:
+// 0 success, 2 bad input, 1 run-time failure, 130 / 143 stopped by SIGINT / SIGTERM (after a checkpoint).
+
+#include "core/errors.h"
+#include "pipeline/pipeline.h"
+#include "tools/study/study.h"
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+
+#include <cstdio>
+
+int main(int argc, char** argv) {
+    using namespace ganache;
+    CLI::App app{"ganache: offline simulation of highly viscous and melting fluids.\n"
+                 "Stages: sample -> simulate -> surface -> render; `run` does every stage the scene asks for."};
+    app.require_subcommand(1);
+    RunOptions opt;
+
+    auto addSceneArgs = [&](CLI::App* c) {
+        c->add_option("scene", opt.scene, "scene file (YAML, `ganache: 1`; see scenes/README.md)")->required();
+        c->add_option("--quality", opt.quality,
+                      "preview (default: particle radius x the scene's preview_scale), final (the scene's radius), "
+                      "or a number that multiplies the radius");
+    };
+    auto addRunArgs = [&](CLI::App* c) {
+        addSceneArgs(c);
+        c->add_option("--out", opt.out, "output folder (default: out/<scene name>)");
+        c->add_option("--frames", opt.frames, "frame range A-B (or one frame A) within the scene's frames");
+        c->add_option("--threads", opt.threads, "worker threads (default 0: every core)");
+        c->add_flag("--skip-resource-check", opt.skipResourceCheck,
+                    "run even when the memory or disk estimate printed at the start exceeds what the machine has");
+    };
+
+    struct Command {
+        const char* name;
+        const char* help;
+        std::vector<StageId> stages;
+    };
+    const std::vector<Command> commands = {
+        {"run", "run every stage the scene asks for, in order",
+         {StageId::Sample, StageId::Simulate, StageId::Surface, StageId::Render}},
+        {"sample", "turn the scene's shapes into fluid and boundary particles (writes sample/<scene>.vdb)",
+         {StageId::Sample}},
+        {"simulate", "simulate from the sample, writing particles/<scene>.NNNN.vdb", {StageId::Simulate}},
+        {"surface", "turn particle caches into level sets and meshes when the scene has a `surface:` section (writes "
+                    "surface/<scene>.NNNN.vdb, mesh/<scene>.NNNN.obj)",
+         {StageId::Surface}},
+        {"render", "render previews of the meshes or particles when the scene has a `render:` section (writes "
+                   "preview/<scene>.NNNN.png, a contact sheet, an MP4 when ffmpeg is installed)",
+         {StageId::Render}},
+    };
+    std::vector<CLI::App*> subs;
+    for (const auto& c : commands) {
+        subs.push_back(app.add_subcommand(c.name, c.help));
+        addRunArgs(subs.back());
+    }
+    for (std::size_t i : {std::size_t(0), std::size_t(2)})
+        subs[i]->add_flag("--resume", opt.resume,
+                          "continue the simulation from the newest valid checkpoint in the output folder (none: from "
+                          "the start); frames written before it are kept");
+    for (std::size_t i : {std::size_t(0), std::size_t(3), std::size_t(4)})
+        subs[i]->add_flag("--force", opt.force,
+                          "redo surface and render frames whose outputs are newer than their inputs");
+    for (std::size_t i : {std::size_t(0), std::size_t(3)}) {
+        subs[i]->add_option("--memory", opt.memoryGiB,
+                            "GiB the run may plan for (default: 80 % of what the machine, or its cgroup, has "
+                            "free); the surface stage runs frames in parallel as far as it allows")
+            ->check(CLI::PositiveNumber);
+    }
+    bool check = false;
+    subs[1]->add_flag("--check", check,
+                      "print a pre-flight report of every mesh (closed or not, bad edges and faces, bounds, the "
+                      "inside/outside method) and sample nothing");
+    bool explain = false;
+    CLI::App* sceneCmd = app.add_subcommand("scene", "validate a scene file; --explain prints it with defaults filled in");
+    addSceneArgs(sceneCmd);
+    sceneCmd->add_flag("--explain", explain, "print the effective scene (every value, defaults included, with units)");
+
+    StudyOptions study;
+    CLI::App* studyCmd = app.add_subcommand(
+        "study", "what accuracy costs in time: sweep the settings that trade accuracy for speed on the cases in "
+                 "scenes/study/ and write study.csv, a chart per case and report.md");
+    studyCmd->add_flag("--quick", study.quick, "shorter runs and two settings per knob (a few minutes on 2 cores)");
+    studyCmd->add_option("--out", study.out, "output folder (default: out/study; the committed study is docs/study)");
+    studyCmd->add_option("--scenes", study.scenes, "folder of the study's scenes (default: scenes/study)");
+    studyCmd->add_option("--case", study.cases, "only these cases: spinning_cube, couette, viscous_bunny");
+    studyCmd->add_option("--threads", study.threads, "worker threads (default 0: every core)");
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        const int code = app.exit(e);
+        return code == 0 ? 0 : 2;
+    }
+
+    try {
+        if (sceneCmd->parsed()) {
+            sceneCommand(opt, explain);
+            return 0;
+        }
+        if (studyCmd->parsed()) {
+            studyCommand(study);
+            return 0;
+        }
+        if (check) {
+            meshCheckCommand(opt);
+            return 0;
+        }
+        for (std::size_t i = 0; i < commands.size(); ++i)
+            if (subs[i]->parsed()) runCommand(opt, commands[i].stages);
+        return 0;
+    } catch (const InputError& e) {
+        fmt::print(stderr, "error: {}\n", e.what());
+        return 2;
+    } catch (const Interrupted& e) {
+        fmt::print(stderr, "stopped: {}\n", e.what());
+        return 128 + e.signal();
+    } catch (const std::exception& e) {
+        fmt::print(stderr, "error: {}\n", e.what());
+        return 1;
+    }
+}

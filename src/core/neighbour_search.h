@@ -1,0 +1,81 @@
+#pragma once
+// Neighbourhood search on a uniform grid with cell-sorted particles (compact hashing after Ihmsen et al.
+// 2011, "A parallel SPH implementation on multi-core CPUs"). TBB-parallel and deterministic: the lists do
+// not depend on the thread count.
+
+#include "core/types.h"
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace ganache {
+
+/// Neighbour lists in compressed rows: the neighbours of query particle i are
+/// indices[offsets[i] .. offsets[i+1]), in a fixed order that does not depend on the thread count.
+struct NeighbourList {
+    struct Range {
+        const std::uint32_t* first;
+        const std::uint32_t* last;
+        const std::uint32_t* begin() const { return first; }
+        const std::uint32_t* end() const { return last; }
+        std::size_t size() const { return std::size_t(last - first); }
+    };
+
+    std::vector<std::uint64_t> offsets{0};
+    std::vector<std::uint32_t> indices;
+
+    std::size_t particles() const { return offsets.size() - 1; }
+    std::size_t pairs() const { return indices.size(); }
+    Range of(std::size_t i) const { return {indices.data() + offsets[i], indices.data() + offsets[i + 1]}; }
+};
+
+/// A uniform grid of cubic cells over one point set. Cells are addressed by absolute integer coordinates
+/// floor(x / cellSize), so two grids with the same cell size line up (fluid and boundary grids). Points are
+/// sorted cell by cell with the cells in Z (Morton) order, which is also the locality order for reordering.
+class UniformGrid {
+public:
+    /// Cell coordinates must lie within +-kMaxCell on every axis (about +-10 km at a 1 cm cell).
+    static constexpr std::int64_t kMaxCell = (std::int64_t(1) << 20) - 2;
+
+    explicit UniformGrid(Real cellSize);
+
+    /// Sorts the points into cells. Throws std::runtime_error for a non-finite point or one outside the
+    /// addressable range, naming its index.
+    void build(const std::vector<Vec3>& x);
+
+    Real cellSize() const { return m_cellSize; }
+    std::size_t pointCount() const { return m_sorted.size(); }
+    std::size_t cellCount() const { return m_cellKeys.size(); }
+
+    /// Point indices, cell by cell, cells in Z order: a locality-preserving permutation of the points.
+    const std::vector<std::uint32_t>& sortedIndices() const { return m_sorted; }
+
+    /// The sorted points of cell c are sortedIndices()[cellBegin(c) .. cellBegin(c + 1)).
+    std::size_t cellBegin(std::size_t c) const { return m_cellBegin[c]; }
+    /// Integer coordinates of cell c.
+    const std::array<std::int32_t, 3>& cellCoords(std::size_t c) const { return m_cellCoords[c]; }
+    /// Index of the occupied cell with these coordinates, or -1 when it holds no point.
+    std::int64_t findCell(std::int64_t cx, std::int64_t cy, std::int64_t cz) const;
+
+private:
+    Real m_cellSize;
+    std::vector<std::uint32_t> m_sorted;
+    std::vector<std::uint64_t> m_cellKeys;   // Morton keys of the occupied cells, ascending
+    std::vector<std::uint32_t> m_cellBegin;  // cellCount() + 1 offsets into m_sorted
+    std::vector<std::array<std::int32_t, 3>> m_cellCoords;
+    std::vector<std::uint64_t> m_tableKeys;  // open-addressing hash: Morton key -> cell index
+    std::vector<std::uint32_t> m_tableCells;
+    int m_tableBits = 0;
+};
+
+/// Finds, for every query point i, the target points j with |x_i - x_j| < radius. With sameSet the query
+/// and target are one set and i is not its own neighbour. Both grids must have cell size >= radius and be
+/// built from queryX and targetX respectively.
+void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& queryX, const UniformGrid& targetGrid,
+                    const std::vector<Vec3>& targetX, Real radius, bool sameSet, NeighbourList& out);
+
+/// Fluid-fluid lists: builds `grid` from x and finds the neighbours of each point among the others.
+void findFluidNeighbours(UniformGrid& grid, const std::vector<Vec3>& x, Real radius, NeighbourList& out);
+
+}  // namespace ganache

@@ -1,0 +1,35 @@
+#pragma once
+// TBB loops shared by the solvers: per-particle gather loops and sums whose value does not depend on the
+// thread count (fixed chunks, fixed combination order), so every run takes the same solver iterations.
+
+#include "core/types.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <functional>
+#include <vector>
+
+namespace ganache {
+
+/// Calls f(i) for i in [0, n) in parallel; f must write only particle i's slots.
+template <class F>
+void forEachParticle(std::size_t n, F&& f, std::size_t grain = 512) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain), [&](const auto& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) f(i);
+    });
+}
+
+/// sum_i term(i), deterministic for any thread count; T is any type with + and a zero (Real, Eigen vectors).
+template <class T = Real, class Term>
+T deterministicSum(std::size_t n, Term&& term, T zero = T(0)) {
+    return tbb::parallel_deterministic_reduce(
+        tbb::blocked_range<std::size_t>(0, n, 2048), zero,
+        [&](const auto& r, T s) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) s += term(i);
+            return s;
+        },
+        [](const T& a, const T& b) -> T { return a + b; });
+}
+
+}  // namespace ganache

@@ -1,0 +1,111 @@
+#pragma once
+// What the three viscosity methods share (the scene's `effects.viscosity.method`):
+//   weiler2018     implicit, the Laplacian of Eq. 7 [WKBB18], CG with a block and rigid-motion preconditioner
+//   explicit       the same Laplacian integrated explicitly, in sub-steps below its stable step (comparison only)
+//   takahashi2015  implicit, the divergence of the SPH strain rate [TDF*15] (comparison only)
+// Shared: the viscosity of each particle (one value, per fluid, or over temperature), the coefficients of Eq. 7
+// and of the boundary term (Eq. 12), and the bookkeeping of a step: a later coupled pass replaces an earlier
+// pass's change, the boundary's reaction goes to the bodies, and iterations and residuals go to the stats.
+
+#include "physics/simulation.h"
+
+#include <functional>
+#include <optional>
+#include <vector>
+
+namespace ganache {
+
+/// mu of every fluid particle [Pa s]: one value for the scene, or (when the sources differ or melt) each
+/// particle's own, kept in the attribute `viscosity`.
+class ParticleViscosity {
+public:
+    ParticleViscosity(const ViscosityParams& params, const Scene& scene, ParticleSet& particles);
+    /// Recomputes each particle's viscosity from its source and temperature; nothing when it is one value.
+    void refresh(const ParticleSet& particles);
+    Real operator()(std::size_t i) const { return m_perParticle ? (*m_perParticle)[i] : m_mu; }
+
+private:
+    Real m_mu = 0;
+    std::vector<Real>* m_perParticle = nullptr;            // attribute `viscosity`, only when viscosities differ
+    std::vector<Real> m_sourceMu;                          // mu of each fluid and emitter, when viscosity varies
+    std::vector<std::optional<ViscosityLaw>> m_sourceLaw;  // their laws over temperature, with the heat effect
+};
+
+/// Iterations (or explicit sub-steps) and relative residual of one viscosity pass.
+struct ViscosityPass {
+    std::size_t iterations = 0;
+    Real residual = 0;
+};
+
+/// Dot product of two vector fields; deterministic, so every run takes the same CG iterations.
+Real fieldDot(const std::vector<Vec3>& a, const std::vector<Vec3>& b);
+
+/// Preconditioned conjugate gradients for a symmetric positive definite system M x = b, with M and the
+/// preconditioner P given as functions (out = M in, z = P r) and the vectors kept between solves.
+struct ConjugateGradient {
+    using Apply = std::function<void(const std::vector<Vec3>& in, std::vector<Vec3>& out)>;
+    std::vector<Vec3> r, z, p, q;
+    Real scale = 0;  ///< |b - M v| of the last solve: the correction the solve had to make
+    /// `x` holds the initial guess; iterates until |r| <= tolerance |b - M v| (the residual relative to the
+    /// correction the solve has to make from the velocities v before it, not to |b|: at small dt that correction
+    /// is a tiny fraction of the velocity, and a |b|-relative test let a warm-started guess pass untouched step
+    /// after step, 0.1 CG iterations per solve at dt = 0.05 ms) or maxIterations. When v already solves the
+    /// system (scale 0) x becomes v. On return `r` holds the residual b - M x.
+    ViscosityPass solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
+                        const std::vector<Vec3>& v, std::vector<Vec3>& x, Real tolerance, std::size_t maxIterations);
+};
+
+/// A viscosity method as an effect. apply() takes back an earlier coupled pass's change, asks the method for the
+/// new velocities, and records the change, the boundary loads and the statistics.
+class ViscosityMethod : public Effect {
+public:
+    ViscosityMethod(const ViscosityParams& params, const Scene& scene, ParticleSet& particles);
+    void apply(StepContext& ctx, ParticleSet& particles) final;
+
+    /// Iterations and relative residual of the last pass.
+    std::size_t lastIterations() const { return m_last.iterations; }
+    Real lastResidual() const { return m_last.residual; }
+
+protected:
+    /// Writes the velocities after viscosity into `out`, which holds the initial guess on entry (the current
+    /// velocity v, or v plus the previous change with the warm start); v itself is particles.v().
+    virtual ViscosityPass solve(StepContext& ctx, const ParticleSet& particles, std::vector<Vec3>& out) = 0;
+    /// The warning of a pass that ended above the tolerance.
+    virtual std::string capMessage(const StepContext& ctx, const ViscosityPass& pass) const;
+
+    /// 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)), the pair term of Eq. 7 with mu and m averaged
+    /// over the pair, so the operator is symmetric [Eq. 9].
+    Real pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
+                         const Vec3& xij) const;
+    /// 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)), boundary particle k's term [Eq. 11-12].
+    Real boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k, const Vec3& xik) const;
+    bool sticky() const { return m_params.boundaryMu > 0; }
+    /// The boundary's share of particle i's implicit system [Eq. 11-12]: returns sum_k c_ik grad W_ik x_ik^T (the
+    /// operator's diagonal block, per unit mass) and adds sum_k c_ik (v_k . x_ik) grad W_ik, the bodies'
+    /// velocities, to `bodyTerm`.
+    Mat3 boundaryBlock(const StepContext& ctx, const ParticleSet& particles, std::size_t i, Vec3& bodyTerm) const;
+    /// The viscous acceleration of Eq. 7 at particle i for the velocity field `in` [m/s^2]:
+    /// sum_j c_ij (x_ij . (in_i - in_j)) grad W_ij, plus, with boundary viscosity, the boundary's
+    /// sum_k c_ik (x_ik . (in_i - v_k)) grad W_ik, where the bodies' own velocities v_k count only when
+    /// withBodyVelocity (an implicit solve moves them to its right-hand side).
+    Vec3 laplacian(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in, std::size_t i,
+                   bool withBodyVelocity) const;
+
+    const ViscosityParams m_params;
+    ParticleViscosity m_mu;
+
+private:
+    void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, bool firstPass);
+
+    std::vector<Vec3>* m_dv;  // attribute `_viscosity_dv`: the last pass's change
+    std::vector<Vec3> m_out;
+    BodyLoads m_passLoads;    // the viscous loads of the latest pass, which a later pass of the step replaces
+    std::size_t m_lastStep = 0;
+    bool m_hasSolved = false;
+    ViscosityPass m_last;
+};
+
+/// The method the scene's `effects.viscosity.method` names.
+std::unique_ptr<Effect> makeViscosity(const EffectParams& params, const Scene& scene, ParticleSet& particles);
+
+}  // namespace ganache
