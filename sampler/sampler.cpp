@@ -1,5 +1,8 @@
 #include "sampler/sampler.h"
 
+#include "physics/boundary.h"
+
+#include "core/attributes.h"
 #include "core/kernels.h"
 #include "core/neighbour_search.h"
 #include "core/parallel.h"
@@ -125,86 +128,7 @@ std::vector<Vec3> sampleSurface(const TriangleMesh& mesh, Real r) {
     return out;
 }
 
-// Surface grid of a box with spacing <= r: every grid point with an index on a face, top face left out
-// when the box is open (the rim of the side walls stays).
-std::vector<Vec3> sampleBoxWalls(const BoxBoundary& box, Real r) {
-    const Vec3 extent = box.max - box.min;
-    Eigen::Vector3i n;
-    for (int a = 0; a < 3; ++a) n[a] = std::max(1, int(std::ceil(extent[a] / r - 1e-9)));
-    const Vec3 step = extent.cwiseQuotient(n.cast<Real>());
-    std::vector<Vec3> x;
-    for (int k = 0; k <= n.z(); ++k)
-        for (int j = 0; j <= n.y(); ++j)
-            for (int i = 0; i <= n.x(); ++i) {
-                const bool side = i == 0 || i == n.x() || k == 0 || k == n.z();
-                const bool bottom = j == 0, top = j == n.y();
-                if (side || bottom || (top && !box.openTop))
-                    x.push_back(box.min + Vec3(i * step.x(), j * step.y(), k * step.z()));
-            }
-    return x;
-}
-
-// A plane sampled with spacing r where it passes within one support radius of the domain.
-std::vector<Vec3> samplePlane(const PlaneBoundary& plane, const Vec3& lo, const Vec3& hi, Real r, Real h) {
-    const Vec3 n = plane.normal;
-    const Vec3 u = (std::abs(n.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY()).cross(n).normalized();
-    const Vec3 w = n.cross(u);
-    const Vec3 origin = plane.point;
-    Real uMin = INFINITY, uMax = -INFINITY, wMin = INFINITY, wMax = -INFINITY;
-    for (int c = 0; c < 8; ++c) {
-        const Vec3 corner((c & 1) ? hi.x() : lo.x(), (c & 2) ? hi.y() : lo.y(), (c & 4) ? hi.z() : lo.z());
-        const Vec3 d = corner - origin;
-        uMin = std::min(uMin, d.dot(u)), uMax = std::max(uMax, d.dot(u));
-        wMin = std::min(wMin, d.dot(w)), wMax = std::max(wMax, d.dot(w));
-    }
-    std::vector<Vec3> x;
-    const Vec3 loH = lo.array() - h, hiH = hi.array() + h;
-    for (Real a = std::floor(uMin / r) * r; a <= uMax + r; a += r)
-        for (Real b = std::floor(wMin / r) * r; b <= wMax + r; b += r) {
-            const Vec3 p = origin + a * u + b * w;
-            if ((p.array() >= loH.array()).all() && (p.array() <= hiH.array()).all()) x.push_back(p);
-        }
-    return x;
-}
-
 }  // namespace
-
-Real flatWallCalibration(const CubicSpline& w) {
-    // The fluid lattice (spacing d = 2r = h/2) on y >= 0 and a wall sheet (spacing r) at y = -d, where the
-    // missing fluid layer would be. Akinci's 1/delta alone makes the sheet about 6 % heavier than that layer.
-    const Real h = w.supportRadius(), d = h / 2, s = h / 4;
-    const int m = int(std::ceil(h / s)) + 1;
-    Real all = 0, half = 0;
-    for (int k = -m; k <= m; ++k)
-        for (int j = -m; j <= m; ++j)
-            for (int i = -m; i <= m; ++i) {
-                const Real wv = w.W(d * Vec3(i, j, k));
-                all += wv;
-                if (j >= 0) half += wv;
-            }
-    Real deltaFlat = 0, sheet = 0;
-    for (int b = -2 * m; b <= 2 * m; ++b)
-        for (int a = -2 * m; a <= 2 * m; ++a) {
-            deltaFlat += w.W(Vec3(a * s, 0, b * s));
-            sheet += w.W(Vec3(a * s, -d, b * s));
-        }
-    // rho_0 half / all + rho_0 (gamma / deltaFlat) sheet = rho_0
-    return (1 - half / all) * deltaFlat / sheet;
-}
-
-std::vector<Real> boundaryVolumes(const std::vector<Vec3>& x, const CubicSpline& w) {
-    const Real gamma = flatWallCalibration(w);
-    UniformGrid grid(w.supportRadius());
-    NeighbourList nl;
-    findFluidNeighbours(grid, x, w.supportRadius(), nl);
-    std::vector<Real> volume(x.size());
-    forEachParticle(x.size(), [&](std::size_t k) {
-        Real delta = w.W0();
-        for (std::uint32_t l : nl.of(k)) delta += w.W(x[k] - x[l]);
-        volume[k] = gamma / delta;
-    });
-    return volume;
-}
 
 DensityCheck checkDensity(const ParticleSet& fluid, const std::vector<Real>& restDensity,
                           const std::vector<BoundaryBody>& boundaries, const CubicSpline& w) {
@@ -263,7 +187,7 @@ Sample sampleScene(const Scene& scene, const SampleCache* cache) {
     for (const BoundarySpec& spec : scene.boundaries) {
         BoundaryBody body;
         body.name = spec.name;
-        if (auto* box = std::get_if<BoxBoundary>(&spec.shape)) body.x = sampleBoxWalls(*box, r);
+        if (auto* box = std::get_if<BoxBoundary>(&spec.shape)) body.x = boxWallPoints(box->min, box->max, box->openTop, r);
         else if (auto* mesh = std::get_if<MeshShape>(&spec.shape)) {
             const std::uint64_t key = sampleKey(*mesh->mesh, "surface", r, 0);
             auto hit = cache ? cache->load(key) : std::nullopt;
@@ -271,7 +195,10 @@ Sample sampleScene(const Scene& scene, const SampleCache* cache) {
             body.x = hit ? std::move(*hit) : sampleSurface(*mesh->mesh, r);
             if (cache && !hit) cache->store(key, body.x), ++out.cacheMisses;
         }
-        else body.x = samplePlane(std::get<PlaneBoundary>(spec.shape), scene.domainMin, scene.domainMax, r, h);
+        else {
+            const auto& plane = std::get<PlaneBoundary>(spec.shape);
+            body.x = planePoints(plane.point, plane.normal, scene.domainMin, scene.domainMax, r, h);
+        }
         body.volume = boundaryVolumes(body.x, w);
         allBoundary.insert(allBoundary.end(), body.x.begin(), body.x.end());
         out.boundaries.push_back(std::move(body));
@@ -298,7 +225,7 @@ Sample sampleScene(const Scene& scene, const SampleCache* cache) {
 
     // Which fluid (or emitter) a particle came from matters only when there are several (per-fluid viscosity,
     // colours); emitters give their particles the indices after the fluids'.
-    std::vector<Real>* fluidIndex = scene.sourceMaterials().size() > 1 ? &out.fluid.addScalar("fluid") : nullptr;
+    std::vector<Real>* fluidIndex = scene.sourceMaterials().size() > 1 ? &out.fluid.add(attribute::kFluid) : nullptr;
     for (std::size_t f = 0; f < scene.fluids.size(); ++f) {
         const FluidSpec& spec = scene.fluids[f];
         const Real mass = latticeMass(d, spec.material.density, w);

@@ -39,13 +39,6 @@ struct Sample {
 /// otherwise.
 Sample sampleScene(const Scene& scene, const SampleCache* cache = nullptr);
 
-/// Boundary volumes V_k = gamma / sum_l W(x_k - x_l) over one body's particles (Akinci et al. 2012, Eq. 4),
-/// with gamma = flatWallCalibration(w).
-std::vector<Real> boundaryVolumes(const std::vector<Vec3>& x, const CubicSpline& w);
-
-/// The factor gamma that makes a flat wall (sampled with spacing r) one lattice spacing 2r from a resting fluid
-/// lattice give that fluid exactly its rest density; Akinci's 1/delta alone overshoots by about 6 %.
-Real flatWallCalibration(const CubicSpline& w);
 /// Densities of the fluid particles from the fluid and boundary neighbours, relative to rest: rho_i / rho0_i - 1.
 /// rho0_i of each particle comes from its mass and the lattice (all fluids share one lattice spacing).
 DensityCheck checkDensity(const ParticleSet& fluid, const std::vector<Real>& restDensity,

@@ -1,10 +1,11 @@
 #include "surfacer/surfacer.h"
 
 #include "io/vdb_file.h"
+#include "core/attributes.h"
 #include "core/kernels.h"
 #include "core/neighbour_search.h"
 #include "core/parallel.h"
-#include "app/report.h"
+#include "core/timing.h"
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>
@@ -391,7 +392,7 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSet
         fog->setName("density");
         out.m_grids->extra.push_back(fog);
     }
-    const std::vector<Real>* temperature = fluid.findScalar("temperature");
+    const std::vector<Real>* temperature = fluid.find(attribute::kTemperature);
     const bool wantTemperature = (settings.temperatureGrid || settings.meshTemperature) && temperature;
     std::unique_ptr<NearestParticle> nearest;
     if (!x.empty() && (wantTemperature || settings.velocityGrid))

@@ -11,6 +11,15 @@
 
 namespace ganache {
 
+/// A per-particle attribute by name and type (Real or Vec3), declared once as a constant: core/attributes.h for
+/// those several parts share, an effect's own file for its private state. Cached attributes are written to particle
+/// caches; uncached ones (solver warm starts) move with the particles but are never written.
+template <class T>
+struct Attribute {
+    const char* name;
+    bool cached = true;
+};
+
 /// Fluid particles, one array per attribute. Every attribute has size() entries. The core attributes
 /// (position, velocity, mass, id) always exist; effects add their own named scalar or vector attributes
 /// (temperature, per-particle viscosity, ...) only when a scene asks for them. reorder() is the one place
@@ -32,9 +41,18 @@ public:
     const std::vector<Real>& mass() const { return m_mass; }
     const std::vector<std::uint64_t>& id() const { return m_id; }  ///< stable identities, unique in a run
 
-    /// Adds a named per-particle scalar (initialised to `value`) and returns it; throws if it exists.
-    /// Cached attributes are written to particle caches; uncached ones (solver warm starts) are state that
-    /// moves with the particles but is never written.
+    /// Adds an attribute (every particle gets `value`) and returns it; std::logic_error when it exists.
+    std::vector<Real>& add(const Attribute<Real>& a, Real value = 0) { return addScalar(a.name, value, a.cached); }
+    std::vector<Vec3>& add(const Attribute<Vec3>& a, const Vec3& value = Vec3::Zero()) {
+        return addVector(a.name, value, a.cached);
+    }
+    /// The attribute, or null when the particles do not carry it.
+    std::vector<Real>* find(const Attribute<Real>& a) { return findScalar(a.name); }
+    const std::vector<Real>* find(const Attribute<Real>& a) const { return findScalar(a.name); }
+    std::vector<Vec3>* find(const Attribute<Vec3>& a) { return findVector(a.name); }
+    const std::vector<Vec3>* find(const Attribute<Vec3>& a) const { return findVector(a.name); }
+
+    /// The same by name, for readers of files (caches, checkpoints) that meet attributes they do not know.
     std::vector<Real>& addScalar(const std::string& name, Real value = 0, bool cached = true);
     std::vector<Vec3>& addVector(const std::string& name, const Vec3& value = Vec3::Zero(), bool cached = true);
     bool isCached(const std::string& name) const { return !m_uncached.count(name); }
@@ -68,8 +86,8 @@ private:
     std::set<std::string> m_uncached;
 };
 
-/// Which source of fluid (index in Scene::sourceMaterials()) particle i came from, given the set's `fluid`
-/// attribute; a set without one has a single source, 0.
+/// Which source of fluid (index in SimulationSetup::sources) particle i came from, given the set's `fluid`
+/// attribute (attribute::kFluid); a set without one has a single source, 0.
 inline std::size_t sourceIndex(const std::vector<Real>* fluidAttribute, std::size_t i) {
     return fluidAttribute ? std::size_t((*fluidAttribute)[i]) : 0;
 }

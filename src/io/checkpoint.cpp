@@ -1,5 +1,6 @@
 #include "io/checkpoint.h"
 
+#include "core/byte_stream.h"
 #include "io/atomic_file.h"
 #include "io/checksum.h"
 
@@ -16,71 +17,12 @@ namespace ganache {
 namespace {
 
 constexpr char kMagic[8] = {'G', 'N', 'C', 'H', 'C', 'K', 'P', 'T'};
-constexpr std::uint32_t kVersion = 1;
+constexpr std::uint32_t kVersion = 2;  // 2: effects save their own state
 
-// Writing and reading share one description of the state (fields() below): the same calls on a Writer append
-// each value, on a Reader take it back, so the two can never disagree on the order.
-class Writer {
-public:
-    template <class T>
-    std::enable_if_t<std::is_arithmetic_v<T>> operator()(const T& value) {
-        bytes.append(reinterpret_cast<const char*>(&value), sizeof value);
-    }
-    void operator()(const Vec3& v) { raw(v.data(), sizeof(Real) * 3); }
-    void operator()(const std::string& s) {
-        (*this)(std::uint64_t(s.size()));
-        bytes += s;
-    }
-    template <class T>
-    void operator()(const std::vector<T>& values) {
-        (*this)(std::uint64_t(values.size()));
-        if constexpr (std::is_arithmetic_v<T>) raw(values.data(), values.size() * sizeof(T));
-        else
-            for (const T& v : values) (*this)(v);
-    }
-    void raw(const void* data, std::size_t size) { bytes.append(static_cast<const char*>(data), size); }
-
-    std::string bytes;
-};
-
-class Reader {
-public:
-    explicit Reader(std::string_view bytes) : m_in(bytes) {}
-
-    template <class T>
-    std::enable_if_t<std::is_arithmetic_v<T>> operator()(T& value) {
-        raw(&value, sizeof value);
-    }
-    void operator()(Vec3& v) { raw(v.data(), sizeof(Real) * 3); }
-    void operator()(std::string& s) {
-        s.resize(count(1));
-        raw(s.data(), s.size());
-    }
-    template <class T>
-    void operator()(std::vector<T>& values) {
-        values.resize(count(std::is_arithmetic_v<T> ? sizeof(T) : 1));
-        if constexpr (std::is_arithmetic_v<T>) raw(values.data(), values.size() * sizeof(T));
-        else
-            for (T& v : values) (*this)(v);
-    }
-    void raw(void* data, std::size_t size) {
-        if (size > m_in.size() - m_at) throw std::runtime_error("it ends early (truncated)");
-        std::memcpy(data, m_in.data() + m_at, size);
-        m_at += size;
-    }
-    // A length that the rest of the file can hold, at `least` bytes per element.
-    std::size_t count(std::size_t least) {
-        std::uint64_t n = 0;
-        (*this)(n);
-        if (n > (m_in.size() - m_at) / least) throw std::runtime_error("a length field is larger than the file");
-        return std::size_t(n);
-    }
-    bool atEnd() const { return m_at == m_in.size(); }
-
-private:
-    std::string_view m_in;
-    std::size_t m_at = 0;
-};
+// Writing and reading share one description of the state (fields() below): the same calls on a ByteWriter append
+// each value, on a ByteReader take it back, so the two can never disagree on the order.
+using Writer = ByteWriter;
+using Reader = ByteReader;
 
 // Particles: the core arrays, then each named attribute with whether particle caches carry it.
 void fields(Writer& io, const ParticleSet& p) {
@@ -127,28 +69,26 @@ void fields(Reader& io, ParticleSet& p) {
 template <class IO, class Stats>
 void statsFields(IO& io, Stats& s) {
     io(s.steps), io(s.pressureIterations), io(s.pressureCapHits), io(s.divergenceIterations),
-        io(s.divergenceCapHits), io(s.viscositySolves), io(s.viscosityIterations), io(s.viscosityCapHits),
-        io(s.viscosityWorstResidual), io(s.removedParticles), io(s.emittedParticles), io(s.boundaryContacts),
-        io(s.heatSubsteps), io(s.heatSubstepsMax), io(s.dtMin), io(s.dtMax);
+        io(s.divergenceCapHits), io(s.removedParticles), io(s.addedParticles), io(s.boundaryContacts), io(s.dtMin),
+        io(s.dtMax);
     auto& t = s.time;
-    io(t.heat), io(t.forces), io(t.pressure), io(t.advect), io(t.emit), io(t.neighbours), io(t.divergence),
-        io(t.viscosity), io(t.endOfStep);
+    io(t.pressure), io(t.advect), io(t.neighbours), io(t.divergence);
     io(s.warnings), io(s.warningCount);
 }
 
-template <class IO, class Emitter>
-void emitterFields(IO& io, Emitter& e) {
-    io(e.travelled), io(e.report.name), io(e.report.emitted), io(e.report.blocked);
+template <class IO, class Effect>
+void effectFields(IO& io, Effect& e) {
+    io(e.name), io(e.seconds), io(e.bytes);
 }
 
 template <class IO, class Info, class State>
 void fields(IO& io, Info& info, State& s) {
     io(info.scene), io(info.sceneHash), io(info.particleRadius), io(info.frame);
-    io(s.time), io(s.step), io(s.nextId);
+    io(s.time), io(s.step);
     fields(io, s.fluid);
-    if constexpr (std::is_const_v<State>) io(std::uint64_t(s.emitters.size()));
-    else s.emitters.resize(io.count(1));
-    for (auto& e : s.emitters) emitterFields(io, e);
+    if constexpr (std::is_const_v<State>) io(std::uint64_t(s.effects.size()));
+    else s.effects.resize(io.count(1));
+    for (auto& e : s.effects) effectFields(io, e);
     io(s.totalImpulse), io(s.totalAngular), io(s.peakForce);
     statsFields(io, s.stats);
 }

@@ -1,6 +1,9 @@
 #include "physics/emitter.h"
 
-#include "core/particles.h"
+#include "core/attributes.h"
+#include "core/byte_stream.h"
+#include "core/kernels.h"
+#include "physics/setup.h"
 #include "physics/simulation.h"
 
 #include <fmt/format.h>
@@ -49,23 +52,25 @@ Real emitterFlowRate(const EmitterSpec& e, Real r) {
     return Real(nozzleSites(e, r).size()) * 4 * r * r * e.speed;
 }
 
-Emitters::Emitters(const Scene& scene, Real particleRadius) : m_spacing(2 * particleRadius) {
-    const CubicSpline kernel(supportRadiusFor(particleRadius));
-    for (std::size_t e = 0; e < scene.emitters.size(); ++e) {
+Emitters::Emitters(const SimulationSetup& setup, const ParticleSet& particles) : m_spacing(2 * setup.particleRadius) {
+    const CubicSpline kernel(supportRadiusFor(setup.particleRadius));
+    const std::size_t firstSource = setup.sources.size() - setup.emitters.size();
+    for (std::size_t e = 0; e < setup.emitters.size(); ++e) {
         Nozzle n;
-        n.spec = scene.emitters[e];
-        n.sites = nozzleSites(n.spec, particleRadius);
+        n.spec = setup.emitters[e];
+        n.sites = nozzleSites(n.spec, setup.particleRadius);
         for (const Vec3& s : n.sites) n.reach = std::max(n.reach, s.norm());
         n.mass = latticeMass(m_spacing, n.spec.material.density, kernel);
         n.travelled = m_spacing;  // the first layer leaves as emission starts
-        n.sourceIndex = std::uint32_t(scene.fluids.size() + e);
+        n.sourceIndex = std::uint32_t(firstSource + e);
         m_nozzles.push_back(std::move(n));
-        m_reports.push_back({scene.emitters[e].name, 0, 0});
+        m_reports.push_back({setup.emitters[e].name, 0, 0});
     }
+    for (std::uint64_t id : particles.id()) m_nextId = std::max(m_nextId, id + 1);
 }
 
-void Emitters::emit(Real t0, Real dt, ParticleSet& particles, std::uint64_t& nextId, SolverStats& stats) {
-    const Real t1 = t0 + dt;
+void Emitters::apply(StepContext& ctx, ParticleSet& particles) {
+    const Real t0 = ctx.time, t1 = ctx.time + ctx.dt;
     for (std::size_t e = 0; e < m_nozzles.size(); ++e) {
         Nozzle& n = m_nozzles[e];
         const Real active = std::min(t1, n.spec.end) - std::max(t0, n.spec.start);
@@ -76,32 +81,42 @@ void Emitters::emit(Real t0, Real dt, ParticleSet& particles, std::uint64_t& nex
         while (n.travelled >= m_spacing * (1 - 1e-9)) {
             // This layer left the nozzle when the fluid had travelled one spacing, `travelled - spacing` ago.
             const Real left = std::max(n.spec.start, last - std::max<Real>(0, n.travelled - m_spacing) / n.spec.speed);
-            emitLayer(n, e, left, last - left, particles, nextId, stats);
+            emitLayer(n, e, left, last - left, particles, ctx);
             n.travelled -= m_spacing;
         }
     }
 }
 
-std::vector<EmitterState> Emitters::state() const {
-    std::vector<EmitterState> out;
-    for (std::size_t e = 0; e < m_nozzles.size(); ++e) out.push_back({m_nozzles[e].travelled, m_reports[e]});
-    return out;
+std::vector<Counter> Emitters::counters(std::size_t) const {
+    std::size_t emitted = 0, blocked = 0;
+    for (const auto& r : m_reports) emitted += r.emitted, blocked += r.blocked;
+    return {{"particles_emitted", double(emitted)}, {"sites_blocked", double(blocked)}};
 }
 
-void Emitters::restore(const std::vector<EmitterState>& state) {
-    bool same = state.size() == m_nozzles.size();
-    for (std::size_t e = 0; same && e < state.size(); ++e) same = state[e].report.name == m_reports[e].name;
-    if (!same)
-        throw std::runtime_error(fmt::format("the saved state has {} emitter(s), the scene {} (or their names differ)",
-                                             state.size(), m_nozzles.size()));
-    for (std::size_t e = 0; e < state.size(); ++e) {
-        m_nozzles[e].travelled = state[e].travelled;
-        m_reports[e] = state[e].report;
+void Emitters::save(ByteWriter& out) const {
+    out(m_nextId);
+    out(std::uint64_t(m_nozzles.size()));
+    for (std::size_t e = 0; e < m_nozzles.size(); ++e)
+        out(m_reports[e].name), out(m_nozzles[e].travelled), out(m_reports[e].emitted), out(m_reports[e].blocked);
+}
+
+void Emitters::restore(ByteReader& in) {
+    in(m_nextId);
+    const std::size_t count = in.count(1);
+    if (count != m_nozzles.size())
+        throw std::runtime_error(fmt::format("the saved state has {} emitter(s), the scene {}", count, m_nozzles.size()));
+    for (std::size_t e = 0; e < count; ++e) {
+        std::string name;
+        in(name);
+        if (name != m_reports[e].name)
+            throw std::runtime_error(fmt::format("the saved state's emitter {} is '{}', the scene's '{}'", e, name,
+                                                 m_reports[e].name));
+        in(m_nozzles[e].travelled), in(m_reports[e].emitted), in(m_reports[e].blocked);
     }
 }
 
 void Emitters::emitLayer(Nozzle& n, std::size_t index, Real t, Real age, ParticleSet& particles,
-                         std::uint64_t& nextId, SolverStats& stats) {
+                         StepContext& ctx) {
     const BodyMotion& motion = n.spec.motion;
     const Mat3 rotation = motion.rotation(t);
     const Vec3 centre = motion.transform(n.spec.position, t);
@@ -114,8 +129,8 @@ void Emitters::emitLayer(Nozzle& n, std::size_t index, Real t, Real age, Particl
     for (const Vec3& x : particles.x())
         if ((x - layerCentre).norm() <= n.reach + 2 * blockDistance) nearby.push_back(x);
 
-    std::vector<Real>* source = particles.findScalar("fluid");
-    std::vector<Real>* temperature = particles.findScalar("temperature");
+    std::vector<Real>* source = particles.find(attribute::kFluid);
+    std::vector<Real>* temperature = particles.find(attribute::kTemperature);
     std::size_t blocked = 0;
     for (const Vec3& site : n.sites) {
         // Each particle leaves at the nozzle's speed plus the velocity of its point of the (moving) nozzle, and
@@ -129,14 +144,14 @@ void Emitters::emitLayer(Nozzle& n, std::size_t index, Real t, Real age, Particl
             ++blocked;
             continue;
         }
-        particles.add(x, velocity, n.mass, nextId++);
+        particles.add(x, velocity, n.mass, m_nextId++);
         if (source) source->back() = Real(n.sourceIndex);
         if (temperature) temperature->back() = n.spec.temperature;
     }
     EmitterReport& report = m_reports[index];
     report.emitted += n.sites.size() - blocked;
     if (blocked > 0 && report.blocked == 0)
-        stats.warn(fmt::format("t = {:.4f} s: emitter '{}' found fluid still at its nozzle and skipped {} of {} "
+        ctx.stats.warn(fmt::format("t = {:.4f} s: emitter '{}' found fluid still at its nozzle and skipped {} of {} "
                                "sites; the stream is backing up (later skips are counted in the report)",
                                t, n.spec.name, blocked, n.sites.size()));
     report.blocked += blocked;

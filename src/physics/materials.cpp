@@ -1,5 +1,9 @@
 #include "physics/materials.h"
 
+#include "scene/section.h"
+
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -79,6 +83,83 @@ const Material* findPreset(const std::string& name) {
     for (const auto& m : materialPresets())
         if (m.name == name) return &m;
     return nullptr;
+}
+
+namespace {
+
+std::vector<std::string> presetNames() {
+    std::vector<std::string> names;
+    for (const auto& m : materialPresets()) names.push_back(m.name);
+    return names;
+}
+
+// `viscosity_law: {reynolds: {...}}` or `{ramp: [{temperature, mu}, ...]}`.
+ViscosityLaw readViscosityLaw(Section s) {
+    ViscosityLaw law;
+    if (s.exactlyOne({"reynolds", "ramp"}, "viscosity law", "e.g. `reynolds: {mu0: 5.0e6, alpha: 0.35}`") == "reynolds") {
+        Section r = *s.child("reynolds");
+        law.mu0 = r.positive("mu0", std::nullopt, "Pa s");
+        law.t0 = r.number("t0", law.t0, "C");
+        law.alpha = r.number("alpha", std::nullopt, "1/K");
+        law.muMin = r.positive("min", law.mu0 * 1e-6, "Pa s");
+        law.muMax = r.positive("max", law.mu0 * 1e6, "Pa s");
+        if (law.muMax < law.muMin)
+            r.fail("max", fmt::format("{}.max ({} Pa s) is below min ({} Pa s)", r.path(), formatNumber(law.muMax),
+                                      formatNumber(law.muMin)),
+                   "make max at least min");
+        r.rejectUnused();
+    } else {
+        law.kind = ViscosityLaw::Kind::Ramp;
+        for (Section& p : s.list("ramp")) {
+            const Real t = p.number("temperature", std::nullopt, "C");
+            if (!law.ramp.empty() && !(t > law.ramp.back().first))
+                p.fail("temperature", fmt::format("{}.temperature ({} C) must be above the previous point's ({} C)",
+                                                  p.path(), formatNumber(t), formatNumber(law.ramp.back().first)),
+                       "list the ramp in increasing temperature");
+            law.ramp.emplace_back(t, p.positive("mu", std::nullopt, "Pa s"));
+            p.rejectUnused();
+        }
+        if (law.ramp.empty())
+            s.fail("ramp", s.path() + ".ramp has no points", "give at least one `{temperature: C, mu: Pa s}`");
+    }
+    s.rejectUnused();
+    return law;
+}
+
+}  // namespace
+
+std::vector<Material> readMaterials(std::optional<Section> section) {
+    std::vector<Material> out;
+    if (!section) return out;
+    for (const std::string& key : section->keys()) {
+        if (findPreset(key))
+            section->failAtKey(key, fmt::format("material '{}' has the name of a built-in preset", key),
+                          "pick another name; presets cannot be redefined");
+        Section m = *section->child(key);
+        const std::string base = m.choice("base", "water", presetNames());
+        Material mat = *findPreset(base);
+        mat.name = key;
+        mat.density = m.positive("density", mat.density, "kg/m^3");
+        mat.mu = m.number("mu", mat.mu, "Pa s", Bounds::nonNegative());
+        mat.conductivity = m.number("conductivity", mat.conductivity, "W/(m K)", Bounds::nonNegative());
+        mat.heatCapacity = m.positive("heat_capacity", mat.heatCapacity, "J/(kg K)");
+        if (auto law = m.child("viscosity_law")) mat.law = readViscosityLaw(*law);
+        mat.colour = m.colour("colour", mat.colour);
+        mat.source = "user material based on " + base;
+        m.rejectUnused();
+        out.push_back(mat);
+    }
+    section->rejectUnused();
+    return out;
+}
+
+Material readMaterialChoice(Section& fluid, const std::vector<Material>& custom) {
+    std::vector<std::string> names = presetNames();
+    for (const auto& m : custom) names.push_back(m.name);
+    const std::string name = fluid.choice("material", "water", names);
+    for (const auto& m : custom)
+        if (m.name == name) return m;
+    return *findPreset(name);
 }
 
 }  // namespace ganache

@@ -10,6 +10,8 @@
 
 namespace ganache {
 
+class Section;
+
 /// How a material's viscosity follows its temperature (used only in scenes with the heat effect).
 struct ViscosityLaw {
     enum class Kind { Reynolds, Ramp } kind = Kind::Reynolds;
@@ -41,5 +43,11 @@ struct Material {
 const std::vector<Material>& materialPresets();
 /// The preset with this name, or nullptr.
 const Material* findPreset(const std::string& name);
+
+/// Reads the scene's `materials:` map (absent: none): each of the user's names starts from a preset (`base`) and
+/// changes its values.
+std::vector<Material> readMaterials(std::optional<Section> section);
+/// Reads the `material` key of a fluid or emitter: a preset's name or one of `custom` (default water).
+Material readMaterialChoice(Section& s, const std::vector<Material>& custom);
 
 }  // namespace ganache

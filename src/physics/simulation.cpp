@@ -1,9 +1,10 @@
 #include "physics/simulation.h"
 
+#include "core/attributes.h"
+#include "core/byte_stream.h"
 #include "core/parallel.h"
+#include "core/timing.h"
 #include "physics/pressure/pressure_dfsph.h"
-#include "app/report.h"
-#include "scene/scene.h"
 
 #include <fmt/format.h>
 #include <tbb/parallel_reduce.h>
@@ -22,36 +23,24 @@ void SolverStats::warn(std::string text) {
     if (warnings.size() < kMaxWarnings) warnings.push_back(std::move(text));
 }
 
-Simulation::Simulation(const Scene& scene, ParticleSet fluid, const std::vector<BoundaryBody>& bodies)
-    : m_particleRadius(scene.particleRadius),
-      m_kernel(supportRadiusFor(scene.particleRadius)),
-      m_latticeSum(latticeKernelSum(2 * scene.particleRadius, m_kernel)),
-      m_domainMin(scene.domainMin),
-      m_domainMax(scene.domainMax),
-      m_timeStep(scene.timeStep),
-      m_pressureSettings(scene.pressure),
-      m_coupling(scene.viscosityCoupling),
+Simulation::Simulation(const SimulationSetup& setup, ParticleSet fluid, const std::vector<BoundaryBody>& bodies)
+    : m_particleRadius(setup.particleRadius),
+      m_kernel(supportRadiusFor(setup.particleRadius)),
+      m_latticeSum(latticeKernelSum(2 * setup.particleRadius, m_kernel)),
+      m_domainMin(setup.domainMin),
+      m_domainMax(setup.domainMax),
+      m_timeStep(setup.timeStep),
+      m_pressureSettings(setup.pressure),
+      m_coupling(setup.viscosityCoupling),
       m_fluid(std::move(fluid)),
+      m_boundary(bodies, setup.bodies),
       m_fluidGrid(m_kernel.supportRadius()),
-      m_boundaryGrid(m_kernel.supportRadius()) {
+      m_boundaryGrid(m_kernel.supportRadius()),
+      m_contact(setup.particleRadius) {
     // Every particle was sampled on the lattice of spacing 2r, so its mass says its rest density.
-    m_restDensity = &m_fluid.addScalar("_rest_density", 0, false);
+    m_restDensity = &m_fluid.add(attribute::kRestDensity);
     for (std::size_t i = 0; i < m_fluid.size(); ++i) (*m_restDensity)[i] = m_fluid.mass()[i] * m_latticeSum;
 
-    for (std::size_t b = 0; b < bodies.size(); ++b) {
-        m_boundary.names.push_back(bodies[b].name);
-        m_boundary.x.insert(m_boundary.x.end(), bodies[b].x.begin(), bodies[b].x.end());
-        m_boundary.volume.insert(m_boundary.volume.end(), bodies[b].volume.begin(), bodies[b].volume.end());
-        m_boundary.body.insert(m_boundary.body.end(), bodies[b].x.size(), std::uint32_t(b));
-        // Caches name their bodies; the scene's motion goes with the body of the same name.
-        BodyMotion motion;
-        for (const auto& spec : scene.boundaries)
-            if (spec.name == bodies[b].name) motion = spec.motion;
-        m_boundary.anyMoving |= !motion.isStatic();
-        m_boundary.motion.push_back(motion);
-    }
-    m_boundary.x0 = m_boundary.x;
-    m_boundary.v.assign(m_boundary.x.size(), Vec3::Zero());
     m_loads.clear(bodies.size());
     m_totalImpulse.assign(bodies.size(), Vec3::Zero());
     m_totalAngular.assign(bodies.size(), Vec3::Zero());
@@ -59,13 +48,13 @@ Simulation::Simulation(const Scene& scene, ParticleSet fluid, const std::vector<
     moveBoundaries(0);
 
     m_pressure = std::make_unique<PressureDFSPH>(m_pressureSettings, m_fluid);
-    m_effects = makeEffects(scene, m_fluid);
-    for (const auto& e : scene.effects) m_effectNames.push_back(e.name);
-    if (!scene.emitters.empty()) {
-        m_emitters = std::make_unique<Emitters>(scene, m_particleRadius);
-        m_effectNames.push_back("emitters");
-        for (std::uint64_t id : m_fluid.id()) m_nextId = std::max(m_nextId, id + 1);
+    for (const EffectSpec& spec : setup.effects) {
+        const EffectEntry* entry = findEffectEntry(spec.name);
+        if (!entry) throw std::logic_error("no effect named '" + spec.name + "' is registered");
+        m_effects.push_back({spec.name, entry->stage, entry->make(*spec.params, setup, m_fluid)});
     }
+    if (!setup.emitters.empty()) m_effects.push_back({"emitters", Stage::Emit, std::make_unique<Emitters>(setup, m_fluid)});
+    for (std::size_t e = 0; e < m_effects.size(); ++e) m_stages[std::size_t(m_effects[e].stage)].push_back(e);
 
     updateNeighbours(true);
     computeDensities();
@@ -78,9 +67,12 @@ SimulationState Simulation::state() const {
     SimulationState s;
     s.time = m_time;
     s.step = m_step;
-    s.nextId = m_nextId;
     s.fluid = m_fluid;
-    if (m_emitters) s.emitters = m_emitters->state();
+    for (const RunningEffect& e : m_effects) {
+        ByteWriter out;
+        e.effect->save(out);
+        s.effects.push_back({e.name, e.seconds, std::move(out.bytes)});
+    }
     s.totalImpulse = m_totalImpulse;
     s.totalAngular = m_totalAngular;
     s.peakForce = m_peakForce;
@@ -93,12 +85,21 @@ void Simulation::restore(const SimulationState& s) {
     if (s.totalImpulse.size() != bodies || s.totalAngular.size() != bodies || s.peakForce.size() != bodies)
         throw std::runtime_error(fmt::format("the saved state has {} boundary bodies, the scene {}",
                                              s.totalImpulse.size(), bodies));
-    if (m_emitters) m_emitters->restore(s.emitters);
-    else if (!s.emitters.empty()) throw std::runtime_error("the saved state has emitters, the scene none");
+    if (s.effects.size() != m_effects.size())
+        throw std::runtime_error(fmt::format("the saved state has {} effects, the scene {}", s.effects.size(),
+                                             m_effects.size()));
+    for (std::size_t e = 0; e < m_effects.size(); ++e) {
+        if (s.effects[e].name != m_effects[e].name)
+            throw std::runtime_error(fmt::format("the saved state's effect {} is '{}', the scene's '{}'", e,
+                                                 s.effects[e].name, m_effects[e].name));
+        ByteReader in(s.effects[e].bytes);
+        m_effects[e].effect->restore(in);
+        if (!in.atEnd()) throw std::runtime_error("the saved state of effect '" + m_effects[e].name + "' is too long");
+        m_effects[e].seconds = s.effects[e].seconds;
+    }
     m_fluid.assignValues(s.fluid);  // in place: the effects hold their attributes by address
     m_time = s.time;
     m_step = s.step;
-    m_nextId = s.nextId;
     m_totalImpulse = s.totalImpulse;
     m_totalAngular = s.totalAngular;
     m_peakForce = s.peakForce;
@@ -115,23 +116,33 @@ StepContext Simulation::context(Real dt) {
                        m_density, *m_restDensity, m_boundary, m_stats, m_loads};
 }
 
+std::vector<std::string> Simulation::effectNames() const {
+    std::vector<std::string> names;
+    for (const RunningEffect& e : m_effects) names.push_back(e.name);
+    return names;
+}
+
+std::vector<EffectSummary> Simulation::effectSummaries() const {
+    std::vector<EffectSummary> out;
+    for (const RunningEffect& e : m_effects) out.push_back({e.name, e.seconds, e.effect->counters(m_stats.steps)});
+    return out;
+}
+
+double Simulation::counter(std::string_view effect, std::string_view name) const {
+    for (const RunningEffect& e : m_effects)
+        if (e.name == effect)
+            for (const Counter& c : e.effect->counters(m_stats.steps))
+                if (c.name == name) return c.value;
+    return 0;
+}
+
 void Simulation::moveBoundaries(Real t) {
     if (!m_boundary.anyMoving) {
         if (m_boundaryGrid.pointCount() != m_boundary.x.size()) m_boundaryGrid.build(m_boundary.x);
         return;
     }
-    auto& b = m_boundary;
-    for (std::size_t k = 0; k < b.x.size(); ++k) {
-        const BodyMotion& m = b.motion[b.body[k]];
-        if (m.isStatic()) continue;
-        b.x[k] = m.transform(b.x0[k], t);
-        b.v[k] = m.velocity(b.x[k], t);
-    }
-    m_boundaryGrid.build(b.x);
-}
-
-std::vector<EmitterReport> Simulation::emitterReports() const {
-    return m_emitters ? m_emitters->reports() : std::vector<EmitterReport>{};
+    m_boundary.moveTo(t);
+    m_boundaryGrid.build(m_boundary.x);
 }
 
 std::vector<BodyReport> Simulation::bodyReports() const {
@@ -192,63 +203,6 @@ Real Simulation::chooseDt(Real maxDt) const {
     return std::min(dt, maxDt);
 }
 
-void Simulation::keepOffBoundaries(StepContext& ctx) {
-    // The pressure solve only pushes a particle once it is compressed, and a lone particle (a splash) is not:
-    // even touching a wall, the wall and its own mass give it less than rest density, so it would fly through.
-    // Before moving, a particle may approach a boundary only to within one particle radius of its nearest
-    // boundary particle; the rest of its approach velocity (relative to the wall, along the wall's normal) is
-    // taken out, inelastically, and given to the body (all of it, for simplicity, to the body of the nearest
-    // boundary particle). Fluid at rest sits two radii from a wall and never
-    // meets this; it never pushes, so it adds no energy.
-    const Real dt = ctx.dt, r = m_particleRadius;
-    const auto& x = m_fluid.x();
-    auto& v = m_fluid.v();
-    const auto& b = m_boundary;
-    auto& change = m_contactChange;
-    auto& nearest = m_contactNearest;
-    change.assign(x.size(), Vec3::Zero());
-    nearest.assign(x.size(), 0);
-    forEachParticle(x.size(), [&](std::size_t i) {
-        Vec3 towardWall = Vec3::Zero();
-        Real closest2 = std::numeric_limits<Real>::infinity();
-        for (std::uint32_t k : m_boundaryNeighbours.of(i)) {
-            const Vec3 xik = x[i] - b.x[k];
-            towardWall += b.volume[k] * m_kernel.gradW(xik);  // grad W points from the particle to k
-            if (xik.squaredNorm() < closest2) closest2 = xik.squaredNorm(), nearest[i] = k;
-        }
-        if (towardWall.squaredNorm() == 0) return;
-        const Vec3 n = -towardWall.normalized();  // out of the wall
-        Vec3 vi = v[i];
-        const Real approach = -(vi - b.v[nearest[i]]).dot(n);
-        const Real allowed = std::max<Real>(0, std::sqrt(closest2) - r) / dt;
-        if (approach > allowed) vi += (approach - allowed) * n;
-        // Where walls meet, one normal cannot hold both: no particle may also come nearer than 3/4 r to any single
-        // boundary particle. Boundary particles are at most r apart, so every gap between them is narrower
-        // (r / sqrt 2 from its centre to its corners): nothing slips through. Fluid sliding along a wall keeps
-        // at least r from it and does not meet this.
-        for (std::uint32_t k : m_boundaryNeighbours.of(i)) {
-            const Vec3 xik = x[i] - b.x[k];
-            const Real dist = xik.norm();
-            if (dist == 0 || dist > r + dt * (vi - b.v[k]).norm()) continue;
-            const Vec3 nk = xik / dist;
-            const Real closing = -(vi - b.v[k]).dot(nk);
-            const Real limit = std::max<Real>(0, dist - 0.75 * r) / dt;
-            if (closing > limit) vi += (closing - limit) * nk;
-        }
-        change[i] = vi - v[i];
-    });
-    for (std::size_t i = 0; i < x.size(); ++i) {
-        if (change[i].squaredNorm() == 0) continue;
-        v[i] += change[i];
-        const Vec3 j = -m_fluid.mass()[i] * change[i];  // what the body took
-        const std::uint32_t body = b.body[nearest[i]];
-        const BodyMotion& motion = b.motion[body];
-        m_loads.impulse[body] += j;
-        m_loads.angularImpulse[body] += (b.x[nearest[i]] - (motion.centre + motion.offset(ctx.time + dt))).cross(j);
-        ++m_stats.boundaryContacts;
-    }
-}
-
 void Simulation::removeEscaped() {
     const auto& x = m_fluid.x();
     std::vector<std::uint8_t> out(x.size());
@@ -290,25 +244,22 @@ void Simulation::checkFinite(const char* stage) {
         m_step, m_time, m_fluid.id()[bad], x[bad].allFinite() ? "velocity" : "position", stage));
 }
 
+void Simulation::runStage(Stage stage, StepContext& ctx, const char* checkName) {
+    const auto& effects = m_stages[std::size_t(stage)];
+    for (std::size_t e : effects) {
+        ScopedTimer t(m_effects[e].seconds);
+        m_effects[e].effect->apply(ctx, m_fluid);
+    }
+    if (!effects.empty()) checkFinite(checkName);
+}
+
 void Simulation::step(Real maxDt) {
     const Real dt = chooseDt(maxDt);
     StepContext ctx = context(dt);
     m_loads.clear(m_boundary.names.size());
-    if (!m_effects[std::size_t(Stage::Heat)].empty()) {
-        ScopedTimer t(m_stats.time.heat);
-        for (auto& e : m_effects[std::size_t(Stage::Heat)]) e->apply(ctx, m_fluid);
-    }
-    {
-        ScopedTimer t(m_stats.time.forces);
-        for (auto& e : m_effects[std::size_t(Stage::Forces)]) e->apply(ctx, m_fluid);
-        checkFinite("forces");
-    }
-    auto applyViscosity = [&] {
-        ScopedTimer t(m_stats.time.viscosity);
-        for (auto& e : m_effects[std::size_t(Stage::Viscosity)]) e->apply(ctx, m_fluid);
-        checkFinite("viscosity");
-    };
-    const bool viscous = !m_effects[std::size_t(Stage::Viscosity)].empty();
+    runStage(Stage::Start, ctx, "start-of-step");
+    runStage(Stage::Forces, ctx, "forces");
+    const bool viscous = !m_stages[std::size_t(Stage::Viscosity)].empty();
     // Coupled (n >= 1): viscosity alternates with the constant-density solve before advection, so the motion
     // that moves the particles has seen both. A lone pressure solve answers gravity with an inviscid flow;
     // advected for a whole step before viscosity acts, that flow made a stiff blob (1e4 Pa s) slump to 60 % of
@@ -322,24 +273,21 @@ void Simulation::step(Real maxDt) {
             m_pressure->solveDensity(ctx, m_fluid, pass == 0);
             checkFinite("constant-density");
         }
-        if (viscous && m_coupling > 0) applyViscosity();
+        if (viscous && m_coupling > 0) runStage(Stage::Viscosity, ctx, "viscosity");
     }
     {
         ScopedTimer t(m_stats.time.advect);
-        if (!m_boundary.x.empty()) keepOffBoundaries(ctx);
+        if (!m_boundary.x.empty()) m_contact.apply(ctx, m_fluid);
         auto& x = m_fluid.x();
         const auto& v = m_fluid.v();
         forEachParticle(x.size(), [&](std::size_t i) { x[i] += dt * v[i]; }, 4096);
         removeEscaped();
     }
-    if (m_emitters) {
-        ScopedTimer t(m_stats.time.emit);
-        const std::size_t before = m_fluid.size();
-        m_emitters->emit(m_time, dt, m_fluid, m_nextId, m_stats);
-        // Emitted layers sit on the sampler's lattice, so their masses say their rest density, as at the start.
-        for (std::size_t i = before; i < m_fluid.size(); ++i) (*m_restDensity)[i] = m_fluid.mass()[i] * m_latticeSum;
-        m_stats.emittedParticles += m_fluid.size() - before;
-    }
+    const std::size_t before = m_fluid.size();
+    runStage(Stage::Emit, ctx, "emit");
+    // Added particles sit on the sampler's lattice, so their masses say their rest density, as at the start.
+    for (std::size_t i = before; i < m_fluid.size(); ++i) (*m_restDensity)[i] = m_fluid.mass()[i] * m_latticeSum;
+    m_stats.addedParticles += m_fluid.size() - before;
     {
         ScopedTimer t(m_stats.time.neighbours);
         moveBoundaries(m_time + dt);
@@ -352,12 +300,7 @@ void Simulation::step(Real maxDt) {
         m_pressure->solveDivergence(ctx, m_fluid);
         checkFinite("divergence-free");
     }
-    if (viscous && m_coupling == 0) applyViscosity();  // Algorithm 1 of the paper
-    {
-        ScopedTimer t(m_stats.time.endOfStep);
-        for (auto& e : m_effects[std::size_t(Stage::EndOfStep)]) e->apply(ctx, m_fluid);
-        checkFinite("end-of-step");
-    }
+    if (viscous && m_coupling == 0) runStage(Stage::Viscosity, ctx, "viscosity");  // Algorithm 1 of the paper
     for (std::size_t b = 0; b < m_loads.impulse.size(); ++b) {
         m_totalImpulse[b] += m_loads.impulse[b];
         m_totalAngular[b] += m_loads.angularImpulse[b];

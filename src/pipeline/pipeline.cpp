@@ -34,13 +34,14 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
     for (const auto& b : sample.boundaries) boundaryCount += b.x.size();
     report.setCounts(sample.fluid.size(), boundaryCount);
 
-    auto& m = report.measurements()["sample"];
-    for (std::size_t f = 0; f < scene.fluids.size(); ++f) m["fluid_particles"][scene.fluids[f].name] = sample.fluidCounts[f];
-    for (const auto& b : sample.boundaries) m["boundary_particles"][b.name] = b.x.size();
-    m["lattice_sites_carved"] = {{"by_earlier_fluids", sample.carved}, {"near_boundaries", sample.carvedByBoundaries}};
-    m["initial_density_error"] = {{"max_compression", sample.density.maxCompression},
-                                  {"mean_interior", sample.density.meanInterior},
-                                  {"interior_particles", sample.density.interiorCount}};
+    for (std::size_t f = 0; f < scene.fluids.size(); ++f)
+        report.measureCount("sample/fluid_particles/" + scene.fluids[f].name, sample.fluidCounts[f]);
+    for (const auto& b : sample.boundaries) report.measureCount("sample/boundary_particles/" + b.name, b.x.size());
+    report.measureCount("sample/lattice_sites_carved/by_earlier_fluids", sample.carved);
+    report.measureCount("sample/lattice_sites_carved/near_boundaries", sample.carvedByBoundaries);
+    report.measure("sample/initial_density_error/max_compression", sample.density.maxCompression);
+    report.measure("sample/initial_density_error/mean_interior", sample.density.meanInterior);
+    report.measureCount("sample/initial_density_error/interior_particles", sample.density.interiorCount);
     for (std::size_t f = 0; f < scene.fluids.size(); ++f) {
         if (sample.fluidCounts[f] > 0) continue;
         const std::string why =
@@ -64,7 +65,8 @@ void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report
                                  ? fmt::format("; meshes: {} from the cache, {} sampled", sample.cacheHits,
                                                sample.cacheMisses)
                                  : std::string());
-    m["mesh_cache"] = {{"hits", sample.cacheHits}, {"misses", sample.cacheMisses}};
+    report.measureCount("sample/mesh_cache/hits", sample.cacheHits);
+    report.measureCount("sample/mesh_cache/misses", sample.cacheMisses);
 }
 
 void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,

@@ -3,6 +3,9 @@
 
 #include "pipeline/stages.h"
 
+#include "core/attributes.h"
+#include "physics/viscosity/viscosity.h"
+
 #include "io/atomic_file.h"
 #include "io/particle_cache.h"
 #include "core/errors.h"
@@ -96,12 +99,12 @@ std::pair<std::vector<Real>, std::string> colourValues(const Scene& scene, const
         for (std::size_t i = 0; i < fluid.size(); ++i) values[i] = fluid.v()[i].norm();
         return {values, "speed [m/s]"};
     case ColourBy::Temperature:
-        if (const auto* t = fluid.findScalar("temperature")) values = *t;
+        if (const auto* t = fluid.find(attribute::kTemperature)) values = *t;
         return {values, "temperature [c]"};
     case ColourBy::Viscosity: {
         // Each particle's own when viscosity varies; otherwise the effect's, or its source material's.
-        const auto* own = fluid.findScalar("viscosity");
-        const auto* source = fluid.findScalar("fluid");
+        const auto* own = fluid.find(attribute::kViscosity);
+        const auto* source = fluid.find(attribute::kFluid);
         const auto* params = static_cast<const ViscosityParams*>(scene.findEffect("viscosity")->params.get());
         const std::vector<Material> materials = scene.sourceMaterials();
         for (std::size_t i = 0; i < fluid.size(); ++i) {

@@ -153,10 +153,12 @@ void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<st
                fluid, boundary, size(kProgramBytes + memory), size(kProgramBytes), size(memory), size(memoryBudget), memoryGiB > 0 ? "(--memory)" : "usable", size(disk),
                size(sample + particles), size(checkpoints), size(levelSets), size(meshes), size(previews),
                size(diskFree), layout.root.string());
-    report.measurements()["plan"] = {{"fluid_particles", fluid},   {"boundary_particles", boundary},
-                                     {"memory_bytes", kProgramBytes + memory},
-                                     {"memory_budget_bytes", memoryBudget},
-                                     {"disk_bytes", disk},         {"disk_free_bytes", diskFree}};
+    report.measure("plan/fluid_particles", fluid);
+    report.measure("plan/boundary_particles", boundary);
+    report.measure("plan/memory_bytes", kProgramBytes + memory);
+    report.measure("plan/memory_budget_bytes", memoryBudget);
+    report.measure("plan/disk_bytes", disk);
+    report.measure("plan/disk_free_bytes", diskFree);
     if (skipCheck) return;
     if (memory > memoryBudget)
         throw SceneError(at,

@@ -25,18 +25,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// Frames carry the boundary particles of the bodies that move (static ones are in the sample).
-std::vector<BoundaryBody> movingBodies(const BoundaryParticles& b) {
-    std::vector<BoundaryBody> out;
-    if (!b.anyMoving) return out;
-    for (std::size_t body = 0; body < b.names.size(); ++body) out.push_back({b.names[body], {}, {}});
-    for (std::size_t k = 0; k < b.x.size(); ++k) {
-        out[b.body[k]].x.push_back(b.x[k]);
-        out[b.body[k]].volume.push_back(b.volume[k]);
-    }
-    return out;
-}
-
 // The scene's checkpoints in the folder, oldest first: names sort by frame, then step.
 std::vector<fs::path> checkpointFiles(const OutputLayout& layout) {
     std::vector<fs::path> out;
@@ -120,11 +108,11 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     for (const auto& b : start.boundaries) boundaryCount += b.x.size();
     report.setCounts(start.fluid.size(), boundaryCount);
 
-    Simulation sim(scene, std::move(start.fluid), start.boundaries);
+    Simulation sim(simulationSetup(scene), std::move(start.fluid), start.boundaries);
     const FrameRange& fr = scene.frames;
     auto writeFrame = [&](std::int64_t f) {
         if (f < frames.first || f > frames.second) return;
-        writeParticleCache(layout.particles(f), sim.particles(), movingBodies(sim.boundary()),
+        writeParticleCache(layout.particles(f), sim.particles(), sim.boundary().movingBodies(),
                            {scene.name, f, sim.time(), fr.fps, scene.particleRadius});
         stage.outputs.push_back(layout.particles(f).string());
     };
@@ -155,7 +143,7 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
             stage.status = "interrupted";
             stage.seconds = clock.seconds();
             stage.outputs.push_back(saved.string());
-            report.setSimulation(sim.stats(), sim.time(), sim.effectNames(), sim.particles().size());
+            report.setSimulation(sim.stats(), sim.time(), sim.effectSummaries(), sim.particles().size());
             report.write(layout.report());
             throw Interrupted(signal,
                               fmt::format("{} during frame {} (t = {:.4f} s); the state is saved in {}\n  continue: "
@@ -171,12 +159,13 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
         progress.update(std::size_t(f - next + 1));
     }
     progress.finish();
-    report.setSimulation(sim.stats(), sim.time(), sim.effectNames(), sim.particles().size());
+    report.setSimulation(sim.stats(), sim.time(), sim.effectSummaries(), sim.particles().size());
     report.setBodies(sim.boundary().names, sim.bodyReports());
-    report.setEmitters(sim.emitterReports());
+    if (const auto* emitters = sim.findEffect<Emitters>()) report.setEmitters(emitters->reports());
     stage.seconds = clock.seconds();
     const SolverStats& s = sim.stats();
-    report.measurements()["checkpoints"] = {{"written", checkpoints}, {"seconds", checkpointSeconds}};
+    report.measureCount("checkpoints/written", checkpoints);
+    report.measure("checkpoints/seconds", checkpointSeconds);
     stage.note = fmt::format("{}{} steps to t = {:.3f} s, {} frames written, {} checkpoints ({:.2f} s){}",
                              from ? fmt::format("resumed at frame {} (t = {:.4f} s); ", from->info.frame,
                                                 from->state.time)

@@ -25,101 +25,9 @@ std::string hashFile(const std::filesystem::path& file) {
     return fmt::format("{:016x}", fnv1a64(bytes.data(), bytes.size()));
 }
 
-std::vector<std::string> presetNames() {
-    std::vector<std::string> names;
-    for (const auto& m : materialPresets()) names.push_back(m.name);
-    return names;
-}
-
 // Exactly one of the shape keys must be present.
 std::string pickShape(Section& s, const std::vector<std::string>& shapes) {
-    std::string found;
-    for (const auto& k : shapes)
-        if (s.has(k)) {
-            if (!found.empty())
-                s.fail(k, fmt::format("{} has both '{}' and '{}'", s.path(), found, k), "give exactly one shape");
-            found = k;
-        }
-    if (found.empty())
-        s.fail("", fmt::format("{} has no shape", s.path()),
-               fmt::format("add one of: {}", joinNames(shapes)) + ", e.g. `box: {min: [0, 0, 0], max: [1, 1, 1]}`");
-    return found;
-}
-
-// `viscosity_law: {reynolds: {...}}` or `{ramp: [{temperature, mu}, ...]}`.
-ViscosityLaw readViscosityLaw(Section s) {
-    ViscosityLaw law;
-    if (pickShape(s, {"reynolds", "ramp"}) == "reynolds") {
-        Section r = *s.child("reynolds");
-        law.mu0 = r.positive("mu0", std::nullopt, "Pa s");
-        law.t0 = r.number("t0", law.t0, "C");
-        law.alpha = r.number("alpha", std::nullopt, "1/K");
-        law.muMin = r.positive("min", law.mu0 * 1e-6, "Pa s");
-        law.muMax = r.positive("max", law.mu0 * 1e6, "Pa s");
-        if (law.muMax < law.muMin)
-            r.fail("max", fmt::format("{}.max ({} Pa s) is below min ({} Pa s)", r.path(), formatNumber(law.muMax),
-                                      formatNumber(law.muMin)),
-                   "make max at least min");
-        r.rejectUnused();
-    } else {
-        law.kind = ViscosityLaw::Kind::Ramp;
-        for (Section& p : s.list("ramp")) {
-            const Real t = p.number("temperature", std::nullopt, "C");
-            if (!law.ramp.empty() && !(t > law.ramp.back().first))
-                p.fail("temperature", fmt::format("{}.temperature ({} C) must be above the previous point's ({} C)",
-                                                  p.path(), formatNumber(t), formatNumber(law.ramp.back().first)),
-                       "list the ramp in increasing temperature");
-            law.ramp.emplace_back(t, p.positive("mu", std::nullopt, "Pa s"));
-            p.rejectUnused();
-        }
-        if (law.ramp.empty())
-            s.fail("ramp", s.path() + ".ramp has no points", "give at least one `{temperature: C, mu: Pa s}`");
-    }
-    s.rejectUnused();
-    return law;
-}
-
-// An sRGB colour, each component in [0, 1].
-Vec3 readColour(Section& s, const std::string& key, std::optional<Vec3> fallback) {
-    const Vec3 c = s.vec3(key, fallback, "sRGB");
-    if (c.minCoeff() < 0 || c.maxCoeff() > 1)
-        s.fail(key, "a colour's components lie in [0, 1] (sRGB)", fmt::format("write e.g. `{}: [0.32, 0.17, 0.09]`", key));
-    return c;
-}
-
-// `materials:` maps a user's name to a preset it starts from and the values it changes.
-std::vector<Material> readMaterials(std::optional<Section> section) {
-    std::vector<Material> out;
-    if (!section) return out;
-    for (const std::string& key : section->keys()) {
-        if (findPreset(key))
-            section->failAtKey(key, fmt::format("material '{}' has the name of a built-in preset", key),
-                          "pick another name; presets cannot be redefined");
-        Section m = *section->child(key);
-        const std::string base = m.choice("base", "water", presetNames());
-        Material mat = *findPreset(base);
-        mat.name = key;
-        mat.density = m.positive("density", mat.density, "kg/m^3");
-        mat.mu = m.number("mu", mat.mu, "Pa s", Bounds::nonNegative());
-        mat.conductivity = m.number("conductivity", mat.conductivity, "W/(m K)", Bounds::nonNegative());
-        mat.heatCapacity = m.positive("heat_capacity", mat.heatCapacity, "J/(kg K)");
-        if (auto law = m.child("viscosity_law")) mat.law = readViscosityLaw(*law);
-        mat.colour = readColour(m, "colour", mat.colour);
-        mat.source = "user material based on " + base;
-        m.rejectUnused();
-        out.push_back(mat);
-    }
-    section->rejectUnused();
-    return out;
-}
-
-Material findMaterial(Section& fluid, const std::vector<Material>& custom) {
-    std::vector<std::string> names = presetNames();
-    for (const auto& m : custom) names.push_back(m.name);
-    const std::string name = fluid.choice("material", "water", names);
-    for (const auto& m : custom)
-        if (m.name == name) return m;
-    return *findPreset(name);
+    return s.exactlyOne(shapes, "shape", "e.g. `box: {min: [0, 0, 0], max: [1, 1, 1]}`");
 }
 
 void requireOrdered(Section& s, const Vec3& min, const Vec3& max, const std::string& what) {
@@ -211,7 +119,7 @@ FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& c
     FluidSpec f;
     f.at = s.where();
     f.name = s.name("name", fmt::format("fluid{}", index));
-    f.material = findMaterial(s, custom);
+    f.material = readMaterialChoice(s, custom);
     f.velocity = s.vec3("velocity", f.velocity, "m/s");
     f.angularVelocity = s.vec3("angular_velocity", f.angularVelocity, "rad/s");
     f.jitter = s.number("jitter", f.jitter, "x lattice spacing", Bounds::closed(0, 0.25));
@@ -234,38 +142,6 @@ FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& c
 }
 
 }  // namespace
-
-std::pair<Real, Real> readTimeWindow(Section& s, std::optional<Real> defaultEnd) {
-    const Real start = s.number("start", 0, "s", Bounds::nonNegative());
-    if (!defaultEnd && !s.has("end")) return {start, std::numeric_limits<Real>::infinity()};
-    const Real end = s.number("end", defaultEnd, defaultEnd ? "s (default: the last frame)" : "s", Bounds::nonNegative());
-    if (!(end > start))
-        s.fail("end", fmt::format("{}.end ({} s) must come after start ({} s)", s.path(), formatNumber(end),
-                                  formatNumber(start)),
-               defaultEnd ? "make end later than start" : "make end later than start, or leave it out to never end");
-    return {start, end};
-}
-
-BodyMotion readMotion(Section m) {
-    BodyMotion mo;
-    if (auto rot = m.child("rotation")) {
-        mo.axis = rot->direction("axis", mo.axis);
-        mo.centre = rot->vec3("centre", mo.centre, "m");
-        mo.angularVelocity = rot->number("angular_velocity", std::nullopt, "rad/s");
-        rot->rejectUnused();
-    }
-    for (Section& k : m.list("keyframes")) {
-        const Real t = k.number("time", std::nullopt, "s", Bounds::nonNegative());
-        if (!mo.keyframes.empty() && !(t > mo.keyframes.back().first))
-            k.fail("time", fmt::format("{}.time ({} s) must come after the previous keyframe ({} s)", k.path(),
-                                       formatNumber(t), formatNumber(mo.keyframes.back().first)),
-                   "list keyframes in increasing time");
-        mo.keyframes.emplace_back(t, k.vec3("offset", std::nullopt, "m"));
-        k.rejectUnused();
-    }
-    m.rejectUnused();
-    return mo;
-}
 
 namespace {
 
@@ -338,7 +214,7 @@ EmitterSpec readEmitter(Section s, std::size_t index, const Scene& scene, const 
     EmitterSpec e;
     e.at = s.where();
     e.name = s.name("name", fmt::format("emitter{}", index));
-    e.material = findMaterial(s, custom);
+    e.material = readMaterialChoice(s, custom);
     if (pickShape(s, {"circle", "rectangle"}) == "circle") {
         Section c = *s.child("circle");
         e.nozzle = CircleNozzle{c.positive("radius", std::nullopt, "m")};
@@ -389,30 +265,6 @@ std::pair<Vec3, Vec3> boundsOf(const FluidShape& shape) {
 
 }  // namespace
 
-Vec3 BodyMotion::offset(Real t) const {
-    if (keyframes.empty()) return Vec3::Zero();
-    if (t <= keyframes.front().first) return keyframes.front().second;
-    for (std::size_t k = 1; k < keyframes.size(); ++k)
-        if (t < keyframes[k].first) {
-            const auto& [t0, a] = keyframes[k - 1];
-            const auto& [t1, b] = keyframes[k];
-            return a + (t - t0) / (t1 - t0) * (b - a);
-        }
-    return keyframes.back().second;
-}
-
-Mat3 BodyMotion::rotation(Real t) const {
-    if (angularVelocity == 0) return Mat3::Identity();
-    return Eigen::AngleAxis<Real>(angularVelocity * t, axis).toRotationMatrix();
-}
-
-Vec3 BodyMotion::translationVelocity(Real t) const {
-    for (std::size_t k = 1; k < keyframes.size(); ++k)
-        if (t >= keyframes[k - 1].first && t < keyframes[k].first)
-            return (keyframes[k].second - keyframes[k - 1].second) / (keyframes[k].first - keyframes[k - 1].first);
-    return Vec3::Zero();
-}
-
 Quality Quality::parse(const std::string& text) {
     if (text == "preview" || text == "final") return {text, 0};
     char* end = nullptr;
@@ -432,11 +284,20 @@ const EffectSpec* Scene::findEffect(const std::string& effectName) const {
     return nullptr;
 }
 
-std::vector<Real> Scene::sourceTemperatures() const {
-    std::vector<Real> out;
-    for (const auto& f : fluids) out.push_back(f.temperature);
-    for (const auto& e : emitters) out.push_back(e.temperature);
-    return out;
+SimulationSetup simulationSetup(const Scene& scene) {
+    SimulationSetup s;
+    s.particleRadius = scene.particleRadius;
+    s.domainMin = scene.domainMin;
+    s.domainMax = scene.domainMax;
+    s.timeStep = scene.timeStep;
+    s.pressure = scene.pressure;
+    s.viscosityCoupling = scene.viscosityCoupling;
+    for (const auto& f : scene.fluids) s.sources.push_back({f.material, f.temperature});
+    for (const auto& e : scene.emitters) s.sources.push_back({e.material, e.temperature});
+    for (const auto& b : scene.boundaries) s.bodies.push_back({b.name, b.motion});
+    s.emitters = scene.emitters;
+    s.effects = scene.effects;
+    return s;
 }
 
 std::vector<Material> Scene::sourceMaterials() const {
@@ -553,7 +414,7 @@ RenderSettings readRender(Section s, const Scene& scene) {
             s.fail("colour_max", "the colour range's maximum must exceed its minimum", "raise colour_max above colour_min");
         out.colourRange = std::make_pair(lo, hi);
     }
-    if (s.has("fluid_colour")) out.fluidColour = readColour(s, "fluid_colour", std::nullopt);
+    if (s.has("fluid_colour")) out.fluidColour = s.colour("fluid_colour", std::nullopt);
     out.ground = s.boolean("ground", out.ground);
     out.contactSheet = s.integer("contact_sheet", out.contactSheet, 0, 100);
     out.video = s.boolean("video", out.video);
@@ -573,8 +434,7 @@ const char* colourByName(ColourBy c) {
 }
 
 Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
-    auto effective = std::make_shared<EffectiveScene>();
-    Section root = openSceneFile(file, effective);
+    Section root = openSceneFile(file);
     Scene scene;
     scene.file = file;
     scene.hash = hashFile(file);
@@ -681,7 +541,8 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     if (auto surface = root.child("surface")) scene.surface = readSurface(*surface, scene);
     if (auto render = root.child("render")) scene.render = readRender(*render, scene);
     root.rejectUnused();
-    for (const auto& e : scene.effects) e.params->check(scene, e.at);
+    const SimulationSetup setup = simulationSetup(scene);
+    for (const auto& e : scene.effects) e.params->check(setup, e.at);
 
     const Real estimate = estimateFluidParticles(scene, scene.particleRadius);
     if (estimate > Real(scene.maxParticles)) {
@@ -694,7 +555,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
                                      "raise particles.max_count if the machine has the memory",
                                      fits));
     }
-    scene.effective = effective;
+    scene.effective = root.effective();
     return scene;
 }
 

@@ -2,12 +2,11 @@
 // Scenes: YAML files (schema `ganache: 1`, documented in scenes/README.md) read into typed structs.
 // Defaults live in the struct member initialisers below and nowhere else.
 
-#include "physics/effect.h"
 #include "core/errors.h"
-#include "physics/materials.h"
-#include "geometry/mesh.h"
-#include "scene/section.h"
 #include "core/types.h"
+#include "geometry/mesh.h"
+#include "physics/setup.h"
+#include "scene/section.h"
 
 #include <filesystem>
 #include <memory>
@@ -95,28 +94,6 @@ struct PlaneBoundary {
 /// the mesh is closed.
 using BoundaryShape = std::variant<BoxBoundary, PlaneBoundary, MeshShape>;
 
-/// Prescribed motion of a boundary body: rotation about an axis through `centre` (which moves with the
-/// translation) at a constant angular velocity, plus a translation interpolated linearly between keyframes.
-struct BodyMotion {
-    Vec3 axis = Vec3::UnitY();  ///< unit length
-    Vec3 centre = Vec3::Zero();       ///< [m], at t = 0
-    Real angularVelocity = 0;         ///< [rad/s], right-handed about axis
-    std::vector<std::pair<Real, Vec3>> keyframes;  ///< (time [s], offset [m]), times increasing; empty: none
-    bool isStatic() const { return angularVelocity == 0 && keyframes.empty(); }
-    /// Offset of the translation at time t (held constant before the first and after the last keyframe).
-    Vec3 offset(Real t) const;
-    /// Translation velocity at time t [m/s].
-    Vec3 translationVelocity(Real t) const;
-    /// The rotation the motion has applied by time t.
-    Mat3 rotation(Real t) const;
-    /// Where a point at x0 at t = 0 is at time t.
-    Vec3 transform(const Vec3& x0, Real t) const { return centre + offset(t) + rotation(t) * (x0 - centre); }
-    /// Velocity at time t of the moving point that is at x then [m/s].
-    Vec3 velocity(const Vec3& x, Real t) const {
-        return angularVelocity * axis.cross(x - centre - offset(t)) + translationVelocity(t);
-    }
-};
-
 /// A solid the fluid cannot pass, made of boundary particles (Akinci et al. 2012); static unless it has a
 /// motion.
 struct BoundarySpec {
@@ -124,48 +101,6 @@ struct BoundarySpec {
     BoundaryShape shape;
     BodyMotion motion;
     Location at;
-};
-
-/// The opening of an emitter, in the plane across its direction.
-struct CircleNozzle {
-    Real radius = 0;  ///< [m]
-};
-/// width runs along x (along z when the emitter points along x), height across both [m].
-struct RectangleNozzle {
-    Real width = 0, height = 0;
-};
-using NozzleShape = std::variant<CircleNozzle, RectangleNozzle>;
-
-/// A nozzle that adds fluid between `start` and `end`: layers of particles (lattice spacing 2r) leave the
-/// opening at `speed` along `direction`. Its position and direction follow `motion` (rotation and keyframes,
-/// as for boundary bodies); the emitted fluid also takes the nozzle's own velocity.
-struct EmitterSpec {
-    std::string name;
-    Material material;
-    NozzleShape nozzle;
-    Vec3 position = Vec3::Zero();     ///< centre of the opening at t = 0 [m]
-    Vec3 direction = -Vec3::UnitY();  ///< unit length
-    Real speed = 0;                   ///< [m/s], > 0
-    Real start = 0, end = 0;          ///< emission times [s]; end defaults to the last frame's time
-    Real temperature = 20;            ///< of the emitted fluid [C], used with the heat effect
-    BodyMotion motion;
-    Location at;
-};
-
-/// Time stepping: CFL-limited dt clamped to [dtMin, dtMax], or a fixed dt.
-struct TimeStepSettings {
-    Real cfl = 0.4;      ///< dt <= cfl * particle diameter / max speed
-    Real dtMin = 1e-5;   ///< [s]
-    Real dtMax = 5e-3;   ///< [s]
-    Real fixedDt = 0;    ///< [s]; > 0 replaces the CFL rule (refinement studies)
-};
-
-/// DFSPH tolerances (Bender & Koschier 2017).
-struct PressureSettings {
-    Real densityError = 1e-4;     ///< mean relative compression allowed after the constant-density solve
-    Real divergenceError = 1e-3;  ///< mean relative density rate dt Drho/Dt / rho_0 allowed after the divergence solve
-    std::int64_t maxIterations = 100;
-    std::int64_t minIterations = 2;
 };
 
 /// The `surface:` section: how particles become level sets and meshes (see surfacer/surfacer.h).
@@ -253,19 +188,13 @@ struct Scene {
     std::shared_ptr<const EffectiveScene> effective;  ///< every value read, defaults included
 
     const EffectSpec* findEffect(const std::string& name) const;
-    /// The material of every source of fluid: the fluids, then the emitters. A particle's `fluid` attribute
+    /// The material of every source of fluid: the fluids, then the emitters. A particle's attribute::kFluid
     /// (present when there are several sources) indexes this list.
     std::vector<Material> sourceMaterials() const;
-    /// The initial temperature of every source of fluid, in the same order [C].
-    std::vector<Real> sourceTemperatures() const;
 };
 
-/// Reads `start` (default 0) and `end` [s] of something that acts for a while; end must come after start. With no
-/// defaultEnd, an absent end never comes (infinity, not recorded in the effective scene).
-std::pair<Real, Real> readTimeWindow(Section& s, std::optional<Real> defaultEnd);
-
-/// Reads a `motion:` map (rotation and keyframes) of a body, an emitter or a heat source.
-BodyMotion readMotion(Section m);
+/// What the simulation needs of the scene.
+SimulationSetup simulationSetup(const Scene& scene);
 
 /// Loads and validates a scene; throws SceneError (file:line:col, what, fix) or InputError.
 Scene loadScene(const std::filesystem::path& file, const Quality& quality);

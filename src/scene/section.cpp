@@ -1,5 +1,9 @@
 #include "scene/section.h"
 
+#include <yaml-cpp/yaml.h>
+
+#include <nlohmann/json.hpp>
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -7,11 +11,52 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <map>
+#include <set>
 #include <sstream>
 
 namespace ganache {
 
+using Json = nlohmann::ordered_json;
+
+struct EffectiveScene {
+    std::string file;                       // the scene file as named by the user
+    Json values = Json::object();           // in reading order
+    std::map<std::string, std::string> units;  // JSON pointer -> unit, for the explain comments
+};
+
+struct Section::Impl {
+    YAML::Node node;
+    YAML::Mark mark;
+    std::shared_ptr<EffectiveScene> out;
+    std::string path;
+    Json::json_pointer pointer;
+    std::set<std::string> read;
+
+    YAML::Node value(const std::string& key) {  // marks the key as read; undefined node when absent
+        read.insert(key);
+        return node[key];
+    }
+    void record(const std::string& key, Json v, const std::string& unit) {
+        const auto p = pointer / key;
+        out->values[p] = std::move(v);
+        if (!unit.empty()) out->units[p.to_string()] = unit;
+    }
+};
+
 namespace {
+
+Section makeSection(YAML::Node node, std::shared_ptr<EffectiveScene> out, std::string dottedPath,
+                    Json::json_pointer pointer, YAML::Mark mark) {
+    auto impl = std::make_unique<Section::Impl>();
+    if (!out->values.contains(pointer)) out->values[pointer] = Json::object();
+    impl->node = std::move(node);
+    impl->mark = mark;
+    impl->out = std::move(out);
+    impl->path = std::move(dottedPath);
+    impl->pointer = std::move(pointer);
+    return Section(std::move(impl));
+}
 
 Location locationOf(const std::string& file, const YAML::Mark& m) {
     if (m.line < 0) return {file, 0, 0};
@@ -71,63 +116,63 @@ std::string closestMatch(const std::string& word, const std::vector<std::string>
     return best;
 }
 
-Section::Section(YAML::Node node, std::shared_ptr<EffectiveScene> out, std::string dottedPath,
-                 nlohmann::ordered_json::json_pointer pointer, YAML::Mark mark)
-    : m_node(std::move(node)), m_mark(mark), m_out(std::move(out)), m_path(std::move(dottedPath)), m_pointer(std::move(pointer)) {
-    if (!m_out->values.contains(m_pointer)) m_out->values[m_pointer] = nlohmann::ordered_json::object();
+Section::Section(std::unique_ptr<Impl> impl) : m(std::move(impl)) {}
+Section::Section(const Section& other) : m(std::make_unique<Impl>(*other.m)) {}
+Section& Section::operator=(const Section& other) {
+    m = std::make_unique<Impl>(*other.m);
+    return *this;
 }
+Section::Section(Section&&) noexcept = default;
+Section& Section::operator=(Section&&) noexcept = default;
+Section::~Section() = default;
 
-Location Section::where() const { return locationOf(m_out->file, m_mark); }
+Location Section::where() const { return locationOf(m->out->file, m->mark); }
 
 Location Section::where(const std::string& key) const {
-    const YAML::Node n = m_node[key];
-    if (n.IsDefined() && n.Mark().line >= 0) return locationOf(m_out->file, n.Mark());
+    const YAML::Node n = m->node[key];
+    if (n.IsDefined() && n.Mark().line >= 0) return locationOf(m->out->file, n.Mark());
     return where();
 }
 
-bool Section::has(const std::string& key) const { return m_node[key].IsDefined(); }
+bool Section::has(const std::string& key) const { return m->node[key].IsDefined(); }
 
 bool Section::isList(const std::string& key) const {
-    const YAML::Node n = m_node[key];
+    const YAML::Node n = m->node[key];
     return n.IsDefined() && n.IsSequence();
 }
 
-std::string Section::keyPath(const std::string& key) const { return m_path.empty() ? key : m_path + "." + key; }
+const std::string& Section::path() const { return m->path; }
+
+void Section::claim(const std::string& key) { m->read.insert(key); }
+
+std::string Section::keyPath(const std::string& key) const { return m->path.empty() ? key : m->path + "." + key; }
 
 void Section::fail(const std::string& key, const std::string& what, const std::string& fix) const {
     throw SceneError(where(key), what, fix);
 }
 
 void Section::failAtKey(const std::string& key, const std::string& what, const std::string& fix) const {
-    for (const auto& kv : m_node)
-        if (kv.first.Scalar() == key) throw SceneError(locationOf(m_out->file, kv.first.Mark()), what, fix);
+    for (const auto& kv : m->node)
+        if (kv.first.Scalar() == key) throw SceneError(locationOf(m->out->file, kv.first.Mark()), what, fix);
     fail(key, what, fix);
 }
 
 void Section::failMissing(const std::string& key, const std::string& what, const std::string& fix) const {
-    for (const auto& kv : m_node) {
+    for (const auto& kv : m->node) {
         const std::string other = kv.first.Scalar();
-        if (!m_read.count(other) && other != key && closestMatch(other, {key}) == key)
-            failAtKey(other, fmt::format("unknown key '{}' in {}", other, m_path.empty() ? "the scene" : m_path),
+        if (!m->read.count(other) && other != key && closestMatch(other, {key}) == key)
+            failAtKey(other, fmt::format("unknown key '{}' in {}", other, m->path.empty() ? "the scene" : m->path),
                       fmt::format("did you mean '{}'? ({})", key, what));
     }
     fail(key, what, fix);
 }
 
-YAML::Node Section::value(const std::string& key) {
-    m_read.insert(key);
-    return m_node[key];
-}
+namespace {
 
-void Section::record(const std::string& key, nlohmann::ordered_json v, const std::string& unit) {
-    const auto p = m_pointer / key;
-    m_out->values[p] = std::move(v);
-    if (!unit.empty()) m_out->units[p.to_string()] = unit;
-}
-
-Real Section::parseNumber(const std::string& key, const YAML::Node& n, const std::string& unit) const {
+// A finite number, or a SceneError at the key.
+Real parseNumber(const Section& section, const std::string& key, const YAML::Node& n, const std::string& unit) {
     if (!n.IsScalar())
-        fail(key, fmt::format("{} must be a number{} (got {})", keyPath(key), unitSuffix(unit), describe(n)),
+        section.fail(key, fmt::format("{} must be a number{} (got {})", section.keyPath(key), unitSuffix(unit), describe(n)),
              fmt::format("write a single number, e.g. `{}: 1.0`", key));
     const std::string& s = n.Scalar();
     std::string lower = s;
@@ -137,37 +182,39 @@ Real Section::parseNumber(const std::string& key, const YAML::Node& n, const std
     errno = 0;
     const Real v = std::strtod(s.c_str(), &end);
     if (yamlSpecial || (end && *end == '\0' && !s.empty() && !std::isfinite(v)) || errno == ERANGE)
-        fail(key, fmt::format("{} must be a finite number{} (got '{}')", keyPath(key), unitSuffix(unit), s),
+        section.fail(key, fmt::format("{} must be a finite number{} (got '{}')", section.keyPath(key), unitSuffix(unit), s),
              "give an ordinary finite value; infinities and NaN are not accepted");
     if (s.empty() || !end || *end != '\0' || std::isspace(static_cast<unsigned char>(s[0])))
-        fail(key, fmt::format("{} must be a number{} (got '{}')", keyPath(key), unitSuffix(unit), s),
+        section.fail(key, fmt::format("{} must be a number{} (got '{}')", section.keyPath(key), unitSuffix(unit), s),
              fmt::format("write a plain number such as 0.5 or 1.0e4, e.g. `{}: 1.0`", key));
     return v;
 }
 
+}  // namespace
+
 Real Section::number(const std::string& key, std::optional<Real> fallback, const std::string& unit, Bounds b) {
-    const YAML::Node n = value(key);
+    const YAML::Node n = m->value(key);
     Real v;
     if (!n.IsDefined()) {
         if (!fallback)
             failMissing(key, fmt::format("{} is missing: a number{} is required", keyPath(key), unitSuffix(unit)),
-                 fmt::format("add `{}: <value>` to {}", key, m_path.empty() ? "the top level" : m_path));
+                 fmt::format("add `{}: <value>` to {}", key, m->path.empty() ? "the top level" : m->path));
         v = *fallback;
     } else {
-        v = parseNumber(key, n, unit);
+        v = parseNumber(*this, key, n, unit);
         const bool tooLow = b.loOpen ? !(v > b.lo) : !(v >= b.lo);
         const bool tooHigh = b.hiOpen ? !(v < b.hi) : !(v <= b.hi);
         if (tooLow || tooHigh)
             fail(key, fmt::format("{} must be {} (got {})", keyPath(key), describeBounds(b, unit), n.Scalar()),
                  fmt::format("give a value {}", describeBounds(b, unit)));
     }
-    record(key, v, unit);
+    m->record(key, v, unit);
     return v;
 }
 
 std::int64_t Section::integer(const std::string& key, std::optional<std::int64_t> fallback, std::int64_t lo,
                               std::int64_t hi) {
-    const YAML::Node n = value(key);
+    const YAML::Node n = m->value(key);
     std::int64_t v;
     if (!n.IsDefined()) {
         if (!fallback)
@@ -189,12 +236,12 @@ std::int64_t Section::integer(const std::string& key, std::optional<std::int64_t
             fail(key, fmt::format("{} must be between {} and {} (got {})", keyPath(key), lo, hi, v),
                  fmt::format("give a whole number from {} to {}", lo, hi));
     }
-    record(key, v, "");
+    m->record(key, v, "");
     return v;
 }
 
 Vec3 Section::vec3(const std::string& key, std::optional<Vec3> fallback, const std::string& unit) {
-    const YAML::Node n = value(key);
+    const YAML::Node n = m->value(key);
     Vec3 v;
     if (!n.IsDefined()) {
         if (!fallback)
@@ -210,20 +257,20 @@ Vec3 Section::vec3(const std::string& key, std::optional<Vec3> fallback, const s
             const YAML::Node c = n[a];
             // Report the component's own position so that the column points at the bad number.
             if (!c.IsScalar())
-                throw SceneError(locationOf(m_out->file, c.Mark()),
+                throw SceneError(locationOf(m->out->file, c.Mark()),
                                  fmt::format("{}[{}] must be a number (got {})", keyPath(key), a, describe(c)),
                                  fmt::format("write `{}: [x, y, z]` with plain numbers", key));
             try {
-                v[a] = parseNumber(key, c, unit);
+                v[a] = parseNumber(*this, key, c, unit);
             } catch (const SceneError& e) {
-                throw SceneError(locationOf(m_out->file, c.Mark()),
+                throw SceneError(locationOf(m->out->file, c.Mark()),
                                  fmt::format("{}[{}] must be a finite number{} (got '{}')", keyPath(key), a,
                                              unitSuffix(unit), c.Scalar()),
                                  fmt::format("write `{}: [x, y, z]` with plain finite numbers", key));
             }
         }
     }
-    record(key, nlohmann::ordered_json::array({v.x(), v.y(), v.z()}), unit);
+    m->record(key, Json::array({v.x(), v.y(), v.z()}), unit);
     return v;
 }
 
@@ -236,7 +283,7 @@ Vec3 Section::direction(const std::string& key, std::optional<Vec3> fallback) {
 }
 
 bool Section::boolean(const std::string& key, bool fallback) {
-    const YAML::Node n = value(key);
+    const YAML::Node n = m->value(key);
     bool v = fallback;
     if (n.IsDefined()) {
         const std::string s = n.IsScalar() ? n.Scalar() : "";
@@ -246,12 +293,12 @@ bool Section::boolean(const std::string& key, bool fallback) {
             fail(key, fmt::format("{} must be true or false (got {})", keyPath(key), describe(n)),
                  fmt::format("write `{}: true` or `{}: false`", key, key));
     }
-    record(key, v, "");
+    m->record(key, v, "");
     return v;
 }
 
 std::string Section::name(const std::string& key, std::optional<std::string> fallback) {
-    const YAML::Node n = value(key);
+    const YAML::Node n = m->value(key);
     std::string v;
     if (!n.IsDefined()) {
         if (!fallback) failMissing(key, fmt::format("{} is missing: a name is required", keyPath(key)),
@@ -267,13 +314,13 @@ std::string Section::name(const std::string& key, std::optional<std::string> fal
                                   describe(n)),
                  fmt::format("e.g. `{}: honey_block`", key));
     }
-    record(key, v, "");
+    m->record(key, v, "");
     return v;
 }
 
 std::string Section::choice(const std::string& key, std::optional<std::string> fallback,
                             const std::vector<std::string>& choices) {
-    const YAML::Node n = value(key);
+    const YAML::Node n = m->value(key);
     std::string v;
     if (!n.IsDefined()) {
         if (!fallback) failMissing(key, fmt::format("{} is missing: one of {} is required", keyPath(key), joinNames(choices)),
@@ -288,40 +335,61 @@ std::string Section::choice(const std::string& key, std::optional<std::string> f
                      fmt::format("accepted: {}", joinNames(choices)));
         }
     }
-    record(key, v, "");
+    m->record(key, v, "");
     return v;
 }
 
+Vec3 Section::colour(const std::string& key, std::optional<Vec3> fallback) {
+    const Vec3 c = vec3(key, fallback, "sRGB");
+    if (c.minCoeff() < 0 || c.maxCoeff() > 1)
+        fail(key, "a colour's components lie in [0, 1] (sRGB)", fmt::format("write e.g. `{}: [0.32, 0.17, 0.09]`", key));
+    return c;
+}
+
+std::string Section::exactlyOne(const std::vector<std::string>& keys, const std::string& what,
+                                const std::string& example) {
+    std::string found;
+    for (const auto& k : keys)
+        if (has(k)) {
+            if (!found.empty())
+                fail(k, fmt::format("{} has both '{}' and '{}'", path(), found, k), "give exactly one " + what);
+            found = k;
+        }
+    if (found.empty())
+        fail("", fmt::format("{} has no {}", path(), what), fmt::format("add one of: {}, {}", joinNames(keys), example));
+    return found;
+}
+
 std::filesystem::path Section::file(const std::string& key) {
-    const YAML::Node n = value(key);
+    const YAML::Node n = m->value(key);
     if (!n.IsDefined() || !n.IsScalar() || n.Scalar().empty())
         fail(key, fmt::format("{} must be a file path (got {})", keyPath(key), describe(n)),
              fmt::format("write `{}: path/to/file`, relative to the scene file", key));
     std::filesystem::path p = n.Scalar();
-    if (p.is_relative()) p = std::filesystem::path(m_out->file).parent_path() / p;
+    if (p.is_relative()) p = std::filesystem::path(m->out->file).parent_path() / p;
     std::error_code ec;
     if (!std::filesystem::is_regular_file(p, ec))
         fail(key, fmt::format("{}: file '{}' does not exist (looked for {})", keyPath(key), n.Scalar(), p.string()),
              "check the spelling; relative paths start at the folder of the scene file");
     // The effective scene names the file absolutely, so its printout loads from anywhere.
     p = std::filesystem::absolute(p).lexically_normal();
-    record(key, p.string(), "");
+    m->record(key, p.string(), "");
     return p;
 }
 
 std::optional<Section> Section::child(const std::string& key) {
-    const YAML::Node n = value(key);
+    const YAML::Node n = m->value(key);
     if (!n.IsDefined()) return std::nullopt;
-    if (n.IsNull()) return Section(YAML::Node(YAML::NodeType::Map), m_out, keyPath(key), m_pointer / key, n.Mark());
+    if (n.IsNull()) return makeSection(YAML::Node(YAML::NodeType::Map), m->out, keyPath(key), m->pointer / key, n.Mark());
     if (!n.IsMap())
         fail(key, fmt::format("{} must be a map of keys (got {})", keyPath(key), describe(n)),
              fmt::format("write `{}:` followed by indented `key: value` lines", key));
-    return Section(n, m_out, keyPath(key), m_pointer / key, n.Mark());
+    return makeSection(n, m->out, keyPath(key), m->pointer / key, n.Mark());
 }
 
 Section Section::section(const std::string& key) {
     if (auto c = child(key)) return *c;
-    return Section(YAML::Node(YAML::NodeType::Map), m_out, keyPath(key), m_pointer / key, m_mark);
+    return makeSection(YAML::Node(YAML::NodeType::Map), m->out, keyPath(key), m->pointer / key, m->mark);
 }
 
 Section Section::require(const std::string& key, const std::string& example) {
@@ -330,49 +398,50 @@ Section Section::require(const std::string& key, const std::string& example) {
 }
 
 std::vector<Section> Section::list(const std::string& key) {
-    const YAML::Node n = value(key);
+    const YAML::Node n = m->value(key);
     std::vector<Section> out;
     if (!n.IsDefined()) return out;
     if (!n.IsSequence())
         fail(key, fmt::format("{} must be a list (got {})", keyPath(key), describe(n)),
              fmt::format("write each entry on its own line starting with '- ' under `{}:`", key));
-    m_out->values[m_pointer / key] = nlohmann::ordered_json::array();
+    m->out->values[m->pointer / key] = Json::array();
     for (std::size_t i = 0; i < n.size(); ++i) {
         const YAML::Node item = n[i];
         const std::string itemPath = fmt::format("{}[{}]", keyPath(key), i);
         if (!item.IsMap())
-            throw SceneError(locationOf(m_out->file, item.Mark()),
+            throw SceneError(locationOf(m->out->file, item.Mark()),
                              fmt::format("{} must be a map of keys (got {})", itemPath, describe(item)),
                              "write `- name: ...` followed by the entry's keys, indented");
-        out.emplace_back(item, m_out, itemPath, m_pointer / key / std::to_string(i), item.Mark());
+        out.push_back(makeSection(item, m->out, itemPath, m->pointer / key / std::to_string(i), item.Mark()));
     }
     return out;
 }
 
 std::vector<std::string> Section::keys() const {
     std::vector<std::string> out;
-    for (const auto& kv : m_node) out.push_back(kv.first.Scalar());
+    for (const auto& kv : m->node) out.push_back(kv.first.Scalar());
     return out;
 }
 
 void Section::rejectUnused() const {
     std::set<std::string> seen;
-    const std::vector<std::string> known(m_read.begin(), m_read.end());
-    for (const auto& kv : m_node) {
+    const std::vector<std::string> known(m->read.begin(), m->read.end());
+    for (const auto& kv : m->node) {
         const std::string key = kv.first.Scalar();
-        const Location at = locationOf(m_out->file, kv.first.Mark());
+        const Location at = locationOf(m->out->file, kv.first.Mark());
         if (!seen.insert(key).second)
             throw SceneError(at, fmt::format("{} is given twice", keyPath(key)), "keep one of the two lines");
-        if (!m_read.count(key)) {
+        if (!m->read.count(key)) {
             const std::string guess = closestMatch(key, known);
-            throw SceneError(at, fmt::format("unknown key '{}' in {}", key, m_path.empty() ? "the scene" : m_path),
+            throw SceneError(at, fmt::format("unknown key '{}' in {}", key, m->path.empty() ? "the scene" : m->path),
                              (guess.empty() ? "" : fmt::format("did you mean '{}'? ", guess)) +
                                  fmt::format("known keys here: {}", joinNames(known)));
         }
     }
 }
 
-Section openSceneFile(const std::filesystem::path& file, std::shared_ptr<EffectiveScene> out) {
+Section openSceneFile(const std::filesystem::path& file) {
+    auto out = std::make_shared<EffectiveScene>();
     out->file = file.string();
     std::error_code ec;
     if (!std::filesystem::exists(file, ec))
@@ -394,12 +463,12 @@ Section openSceneFile(const std::filesystem::path& file, std::shared_ptr<Effecti
     if (!root.IsMap())
         throw SceneError({out->file, 1, 1}, "a scene must be a YAML map of keys (got " + describe(root) + ")",
                          "start the file with `ganache: 1`; see scenes/README.md");
-    return Section(root, out, "", nlohmann::ordered_json::json_pointer(""), YAML::Mark());
+    return makeSection(root, out, "", Json::json_pointer(""), YAML::Mark());
 }
 
 namespace {
 
-std::string yamlScalar(const nlohmann::ordered_json& v) {
+std::string yamlScalar(const Json& v) {
     if (v.is_string()) {
         std::string s = "\"";
         for (char c : v.get<std::string>()) s += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
@@ -414,11 +483,11 @@ std::string yamlScalar(const nlohmann::ordered_json& v) {
     return v.dump();
 }
 
-bool isLeaf(const nlohmann::ordered_json& v) {
+bool isLeaf(const Json& v) {
     return !v.is_object() && !(v.is_array() && !v.empty() && v[0].is_object());
 }
 
-void emitYaml(const nlohmann::ordered_json& v, const std::string& pointer, int indent, const EffectiveScene& s,
+void emitYaml(const Json& v, const std::string& pointer, int indent, const EffectiveScene& s,
               std::string& out, bool firstInListItem = false) {
     const std::string pad(indent, ' ');
     bool first = true;
@@ -443,6 +512,10 @@ void emitYaml(const nlohmann::ordered_json& v, const std::string& pointer, int i
 }
 
 }  // namespace
+
+std::shared_ptr<const EffectiveScene> Section::effective() const { return m->out; }
+
+std::string effectiveJson(const EffectiveScene& scene) { return scene.values.dump(); }
 
 std::string effectiveYaml(const EffectiveScene& scene) {
     std::string out;

@@ -1,31 +1,22 @@
 #pragma once
-// Section: strict, located reading of one YAML map of a scene file (pbrt-style). Every read names its
-// key, unit and fallback; the values read (defaults included) are recorded as the effective scene.
+// Section: strict, located reading of one map of a scene file (pbrt-style). Every read names its key, unit and
+// fallback; the values read (defaults included) are recorded as the effective scene. The YAML parser stays inside
+// section.cpp: whatever reads its own settings (an effect, a material) includes only this header.
 
 #include "core/errors.h"
 #include "core/types.h"
 
-#include <yaml-cpp/yaml.h>
-
-#include <nlohmann/json.hpp>
-
 #include <filesystem>
 #include <limits>
-#include <map>
 #include <memory>
 #include <optional>
-#include <set>
 #include <string>
 #include <vector>
 
 namespace ganache {
 
-/// The effective scene as read: values with defaults filled in, in reading order, and their units.
-struct EffectiveScene {
-    std::string file;                          ///< the scene file as named by the user
-    nlohmann::ordered_json values = nlohmann::ordered_json::object();
-    std::map<std::string, std::string> units;  ///< JSON pointer -> unit, for the explain comments
-};
+/// The effective scene as read: every value with its default filled in, in reading order, with its unit.
+struct EffectiveScene;
 
 /// Allowed range of a number; open ends exclude the bound.
 struct Bounds {
@@ -38,14 +29,21 @@ struct Bounds {
     static Bounds closed(Real lo, Real hi) { return {lo, hi, false, false}; }
 };
 
-/// One YAML map of a scene, with the file name and the keys read so far. Reads throw SceneError with
-/// file:line:col, what is wrong and how to fix it. Call rejectUnused() after the last read.
+/// One map of a scene file, with the file name and the keys read so far. Reads throw SceneError with
+/// file:line:col, what is wrong and how to fix it. Call rejectUnused() after the last read. A copy has its own
+/// record of the keys read.
 class Section {
 public:
-    Section(YAML::Node node, std::shared_ptr<EffectiveScene> out, std::string dottedPath,
-            nlohmann::ordered_json::json_pointer pointer, YAML::Mark mark);
+    struct Impl;
+    explicit Section(std::unique_ptr<Impl> impl);
+    Section(const Section& other);
+    Section& operator=(const Section& other);
+    Section(Section&&) noexcept;
+    Section& operator=(Section&&) noexcept;
+    ~Section();
 
-    const std::string& path() const { return m_path; }  ///< e.g. "fluids[0].box"
+    const std::string& path() const;                     ///< e.g. "fluids[0].box"
+    std::string keyPath(const std::string& key) const;   ///< e.g. "fluids[0].box.min"
     Location where() const;                              ///< the map itself
     Location where(const std::string& key) const;        ///< the key's value, or the map when absent
     bool has(const std::string& key) const;
@@ -66,6 +64,11 @@ public:
     /// One of `choices`; anything else is an error with a "did you mean".
     std::string choice(const std::string& key, std::optional<std::string> fallback,
                        const std::vector<std::string>& choices);
+    /// An sRGB colour [r, g, b], each component in [0, 1].
+    Vec3 colour(const std::string& key, std::optional<Vec3> fallback);
+    /// Which one of `keys` the map has; SceneError when it has none or several. `what` names the kind of thing the
+    /// keys choose ("shape"), `example` shows one.
+    std::string exactlyOne(const std::vector<std::string>& keys, const std::string& what, const std::string& example);
     /// A path, resolved relative to the scene file; it must exist. Recorded (and returned) as an absolute path.
     std::filesystem::path file(const std::string& key);
 
@@ -80,7 +83,7 @@ public:
     /// The keys of this map in file order (for maps keyed by user names: materials, effects).
     std::vector<std::string> keys() const;
     /// Marks a key as handled by the caller (it may not be read through this section).
-    void claim(const std::string& key) { m_read.insert(key); }
+    void claim(const std::string& key);
 
     /// Throws at the first key nobody read (with a "did you mean" among the keys that were read) or at a
     /// key given twice.
@@ -94,18 +97,11 @@ public:
     /// Throws a SceneError located at the key itself (for keys that are names: unknown effects, materials).
     [[noreturn]] void failAtKey(const std::string& key, const std::string& what, const std::string& fix) const;
 
-private:
-    YAML::Node value(const std::string& key);  // marks the key as read; undefined node when absent
-    void record(const std::string& key, nlohmann::ordered_json v, const std::string& unit);
-    std::string keyPath(const std::string& key) const;
-    Real parseNumber(const std::string& key, const YAML::Node& n, const std::string& unit) const;
+    /// Every value read so far from this file, defaults included.
+    std::shared_ptr<const EffectiveScene> effective() const;
 
-    YAML::Node m_node;
-    YAML::Mark m_mark;
-    std::shared_ptr<EffectiveScene> m_out;
-    std::string m_path;
-    nlohmann::ordered_json::json_pointer m_pointer;
-    std::set<std::string> m_read;
+private:
+    std::unique_ptr<Impl> m;
 };
 
 /// The closest of `candidates` to `word` by edit distance, or "" when none is close enough to suggest.
@@ -116,9 +112,11 @@ std::string joinNames(const std::vector<std::string>& names);
 std::string formatNumber(Real v);
 
 /// Parses a YAML file into a root Section; YAML syntax errors become SceneErrors with file:line:col.
-Section openSceneFile(const std::filesystem::path& file, std::shared_ptr<EffectiveScene> out);
+Section openSceneFile(const std::filesystem::path& file);
 
 /// The effective scene as YAML, each value with its unit as a comment.
 std::string effectiveYaml(const EffectiveScene& scene);
+/// The effective scene's values as JSON text (for report.json).
+std::string effectiveJson(const EffectiveScene& scene);
 
 }  // namespace ganache

@@ -336,7 +336,7 @@ effects: {{gravity: {{}}}}
     Sample out = sampleScene(s);
     const std::size_t n = out.fluid.size();
     EXPECT_EQ(n, 6u * 4u * 6u) << "no site carved as inside the open cup";
-    Simulation sim(s, std::move(out.fluid), out.boundaries);
+    Simulation sim(simulationSetup(s), std::move(out.fluid), out.boundaries);
     sim.advanceTo(0.5);
     ASSERT_EQ(sim.particles().size(), n);
     for (const Vec3& x : sim.particles().x())
@@ -387,7 +387,7 @@ effects: {gravity: {}}
 )");
     Sample out = sampleScene(s);
     const std::size_t n = out.fluid.size();
-    Simulation sim(s, std::move(out.fluid), out.boundaries);
+    Simulation sim(simulationSetup(s), std::move(out.fluid), out.boundaries);
     for (Real t = 0.1; t <= 1.0 + 1e-9; t += 0.1) {
         sim.advanceTo(t);
         for (const Vec3& x : sim.particles().x())

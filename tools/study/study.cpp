@@ -10,6 +10,8 @@
 #include "tools/study/chart.h"
 #include "sampler/sampler.h"
 #include "physics/simulation.h"
+#include "physics/viscosity/viscosity.h"
+#include "scene/scene.h"
 
 #include <fmt/format.h>
 #include <tbb/global_control.h>
@@ -33,12 +35,12 @@ constexpr Real kQuickRadius = 1.26, kQuickTime = 0.25;  // --quick: radius facto
 
 // --- the knobs ---------------------------------------------------------------------------------------------
 
-/// One setting of one knob; `apply` edits the scene loaded at the point's resolution.
+/// One setting of one knob; `apply` edits the simulation's set-up at the point's resolution.
 struct Point {
     std::string label;
     bool isDefault = false;
     Real radiusFactor = 1;  ///< times the preview radius
-    std::function<void(Scene&)> apply = [](Scene&) {};
+    std::function<void(SimulationSetup&)> apply = [](SimulationSetup&) {};
 };
 
 struct Knob {
@@ -46,32 +48,23 @@ struct Knob {
     std::vector<Point> points;  ///< from cheapest (or least accurate) to dearest, the default among them
 };
 
-void editViscosity(Scene& scene, const std::function<void(ViscosityParams&)>& edit) {
-    for (auto& e : scene.effects)
-        if (e.name == "viscosity") {
-            auto p = std::make_shared<ViscosityParams>(dynamic_cast<const ViscosityParams&>(*e.params));
-            edit(*p);
-            e.params = p;
-        }
-}
-
 Point viscosityPoint(std::string label, bool isDefault, std::function<void(ViscosityParams&)> edit) {
-    return {std::move(label), isDefault, 1, [edit](Scene& s) { editViscosity(s, edit); }};
+    return {std::move(label), isDefault, 1, [edit](SimulationSetup& s) { edit(s.editEffect<ViscosityParams>("viscosity")); }};
 }
 
 Point pressurePoint(Real densityError, bool isDefault) {
-    return {fmt::format("{:g} / {:g}", densityError, 10 * densityError), isDefault, 1, [densityError](Scene& s) {
+    return {fmt::format("{:g} / {:g}", densityError, 10 * densityError), isDefault, 1, [densityError](SimulationSetup& s) {
                 s.pressure.densityError = densityError;
                 s.pressure.divergenceError = 10 * densityError;
             }};
 }
 
 Point fixedStepPoint(Real dt) {
-    return {fmt::format("fixed {:g} ms", dt * 1000), false, 1, [dt](Scene& s) { s.timeStep.fixedDt = dt; }};
+    return {fmt::format("fixed {:g} ms", dt * 1000), false, 1, [dt](SimulationSetup& s) { s.timeStep.fixedDt = dt; }};
 }
 
 Point cflPoint(Real cfl, bool isDefault) {
-    return {fmt::format("cfl {:g}", cfl), isDefault, 1, [cfl](Scene& s) { s.timeStep.cfl = cfl; }};
+    return {fmt::format("cfl {:g}", cfl), isDefault, 1, [cfl](SimulationSetup& s) { s.timeStep.cfl = cfl; }};
 }
 
 /// The knobs, in the order the report lists them; `quick` keeps two points of each (the default and one more).
@@ -220,7 +213,7 @@ Metrics couetteMetrics(const Scene& scene, const ParticleSet&, const Simulation&
 /// max(0, rho / rho_0 - 1) over the particles.
 Metrics slumpMetrics(const Scene&, const ParticleSet&, const Simulation& sim) {
     const ParticleSet& p = sim.particles();
-    const auto& restDensity = *p.findScalar("_rest_density");
+    const auto& restDensity = sim.restDensity();
     Vec3 c = Vec3::Zero();
     for (const Vec3& x : p.x()) c += x;
     c /= Real(p.size());
@@ -278,8 +271,9 @@ public:
         // Quick mode: radii 1.26x (half the particles) and a quarter of each case's time.
         const Real factor = point.radiusFactor * (m_quick ? kQuickRadius : 1.0);
         Scene scene = loaded(c, factor);
-        point.apply(scene);
         if (c.prepare) c.prepare(scene);
+        SimulationSetup setup = simulationSetup(scene);
+        point.apply(setup);
         Run r;
         r.caseName = c.name;
         r.label = point.label;
@@ -289,7 +283,7 @@ public:
         if (sample == m_samples.end()) sample = m_samples.emplace(key, sampleScene(scene)).first;
         const Real end = scene.frames.timeOf(scene.frames.end) * (m_quick ? kQuickTime : 1.0);
         try {
-            Simulation sim(scene, sample->second.fluid, sample->second.boundaries);
+            Simulation sim(setup, sample->second.fluid, sample->second.boundaries);
             const ParticleSet initial = sim.particles();
             const auto start = std::chrono::steady_clock::now();
             sim.advanceTo(end);
@@ -297,10 +291,8 @@ public:
             r.simulated = end;
             r.particles = sim.particles().size();
             r.steps = sim.stats().steps;
-            r.cgPerSolve = sim.stats().viscositySolves
-                               ? Real(sim.stats().viscosityIterations) / Real(sim.stats().viscositySolves)
-                               : 0;
-            r.capHits = sim.stats().viscosityCapHits;
+            r.cgPerSolve = sim.counter("viscosity", "iterations_per_solve");
+            r.capHits = std::size_t(sim.counter("viscosity", "cap_hits"));
             r.metrics = c.measure(scene, initial, sim);
         } catch (const InputError&) {
             throw;
@@ -535,8 +527,8 @@ void studyCommand(const StudyOptions& options) {
     };
     for (const Case& c : studied) {
         if (c.needsReference) {
-            const Point tight{"reference", false, 1, [&](Scene& s) {
-                                  editViscosity(s, [](ViscosityParams& p) { p.tolerance = 1e-6; });
+            const Point tight{"reference", false, 1, [&](SimulationSetup& s) {
+                                  s.editEffect<ViscosityParams>("viscosity").tolerance = 1e-6;
                                   s.pressure.densityError = 1e-5;
                                   s.pressure.divergenceError = 1e-4;
                                   s.timeStep.fixedDt = options.quick ? 5e-4 : 5e-5;

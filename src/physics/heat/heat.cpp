@@ -1,7 +1,11 @@
 #include "physics/heat/heat.h"
 
+#include "core/attributes.h"
+#include "core/byte_stream.h"
 #include "core/parallel.h"
+#include "physics/setup.h"
 #include "physics/simulation.h"
+#include "scene/section.h"
 
 #include <fmt/format.h>
 
@@ -58,11 +62,11 @@ Real HeatSource::flux(const Vec3& x, Real t) const {
     return intensity / (f * f);
 }
 
-void HeatParams::check(const Scene& scene, const Location&) const {
+void HeatParams::check(const SimulationSetup& setup, const Location&) const {
     for (const auto& b : bodies) {
         bool found = false;
         std::vector<std::string> names;
-        for (const auto& spec : scene.boundaries) {
+        for (const auto& spec : setup.bodies) {
             found |= spec.name == b.body;
             names.push_back(spec.name);
         }
@@ -120,24 +124,23 @@ namespace {
 
 class Heat final : public Effect {
 public:
-    Heat(const HeatParams& params, const Scene& scene, ParticleSet& particles)
-        : m_params(params), m_particleArea(M_PI * scene.particleRadius * scene.particleRadius) {
-        for (const Material& mat : scene.sourceMaterials()) {
-            m_conductivity.push_back(mat.conductivity);
-            m_capacity.push_back(mat.heatCapacity);
+    Heat(const HeatParams& params, const SimulationSetup& setup, ParticleSet& particles)
+        : m_params(params), m_particleArea(M_PI * setup.particleRadius * setup.particleRadius) {
+        for (const FluidSource& s : setup.sources) {
+            m_conductivity.push_back(s.material.conductivity);
+            m_capacity.push_back(s.material.heatCapacity);
         }
         // Every particle starts at its fluid's (or emitter's) temperature unless the cache already carries one.
-        if (!particles.findScalar("temperature")) {
-            const std::vector<Real> start = scene.sourceTemperatures();
-            auto& t = particles.addScalar("temperature");
-            const std::vector<Real>* fluid = particles.findScalar("fluid");
-            for (std::size_t i = 0; i < particles.size(); ++i) t[i] = start.at(sourceIndex(fluid, i));
+        if (!particles.find(attribute::kTemperature)) {
+            auto& t = particles.add(attribute::kTemperature);
+            const std::vector<Real>* fluid = particles.find(attribute::kFluid);
+            for (std::size_t i = 0; i < particles.size(); ++i) t[i] = setup.sources.at(sourceIndex(fluid, i)).temperature;
         }
-        m_bodyTemperature.assign(scene.boundaries.size(), std::numeric_limits<Real>::quiet_NaN());
-        m_bodyConductivity.assign(scene.boundaries.size(), -1);
+        m_bodyTemperature.assign(setup.bodies.size(), std::numeric_limits<Real>::quiet_NaN());
+        m_bodyConductivity.assign(setup.bodies.size(), -1);
         for (const auto& hb : params.bodies)
-            for (std::size_t b = 0; b < scene.boundaries.size(); ++b)
-                if (scene.boundaries[b].name == hb.body) {
+            for (std::size_t b = 0; b < setup.bodies.size(); ++b)
+                if (setup.bodies[b].name == hb.body) {
                     m_bodyTemperature[b] = hb.temperature;
                     m_bodyConductivity[b] = hb.conductivity;
                 }
@@ -146,11 +149,11 @@ public:
     void apply(StepContext& ctx, ParticleSet& particles) override {
         const std::size_t n = particles.size();
         if (n == 0) return;
-        auto& T = *particles.findScalar("temperature");
+        auto& T = *particles.find(attribute::kTemperature);
         const auto& x = particles.x();
         const auto& m = particles.mass();
         const auto& rho = ctx.density;
-        const std::vector<Real>* fluid = particles.findScalar("fluid");
+        const std::vector<Real>* fluid = particles.find(attribute::kFluid);
         auto source = [fluid](std::size_t i) { return sourceIndex(fluid, i); };
 
         // Conduction [Eq. 15-16], written per pair so that the heat one particle gains the other loses:
@@ -194,12 +197,12 @@ public:
             if (s > 0) rates();
             forEachParticle(n, [&](std::size_t i) { T[i] += h * m_rate[i]; }, 4096);
         }
-        ctx.stats.heatSubsteps += substeps;
-        if (substeps > 1 && ctx.stats.heatSubstepsMax <= 1)
+        m_substeps += substeps;
+        if (substeps > 1 && m_substepsMax <= 1)
             ctx.stats.warn(fmt::format("step {}: conduction needs {} sub-steps of {:.3g} s for stability (reported "
                                        "once; the count is in the report)",
                                        ctx.step, substeps, h));
-        ctx.stats.heatSubstepsMax = std::max(ctx.stats.heatSubstepsMax, substeps);
+        m_substepsMax = std::max(m_substepsMax, substeps);
 
         // Sources and radiation act on the surface only.
         if (m_params.sources.empty() && m_params.radiationTime <= 0) return;
@@ -219,6 +222,14 @@ public:
         }, 1024);
     }
 
+    /// Conduction sub-steps: per step on average, and the most in one step.
+    std::vector<Counter> counters(std::size_t steps) const override {
+        return {{"substeps_per_step", steps ? double(m_substeps) / double(steps) : 0.0},
+                {"substeps_max", double(m_substepsMax)}};
+    }
+    void save(ByteWriter& out) const override { out(m_substeps), out(m_substepsMax); }
+    void restore(ByteReader& in) override { in(m_substeps), in(m_substepsMax); }
+
 private:
     HeatParams m_params;
     Real m_particleArea;
@@ -226,12 +237,13 @@ private:
     std::vector<Real> m_bodyTemperature;           // per boundary body; NaN: does not conduct
     std::vector<Real> m_bodyConductivity;
     std::vector<Real> m_rate, m_diagonal;
+    std::size_t m_substeps = 0, m_substepsMax = 0;  // over the run
 };
 
 }  // namespace
 
-std::unique_ptr<Effect> makeHeat(const EffectParams& params, const Scene& scene, ParticleSet& particles) {
-    return std::make_unique<Heat>(dynamic_cast<const HeatParams&>(params), scene, particles);
+std::unique_ptr<Effect> makeHeat(const EffectParams& params, const SimulationSetup& setup, ParticleSet& particles) {
+    return std::make_unique<Heat>(static_cast<const HeatParams&>(params), setup, particles);
 }
 
 }  // namespace ganache

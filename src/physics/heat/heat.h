@@ -4,12 +4,12 @@
 // (Eq. 14), and heat sources shining on surface particles (Eq. 17-18). Built only for scenes with `heat:`;
 // the viscosity effect turns each particle's temperature into its viscosity through its material's law.
 
-#include "physics/effect.h"
 #include "core/errors.h"
 #include "core/kernels.h"
 #include "core/neighbour_search.h"
 #include "core/particles.h"
-#include "scene/scene.h"
+#include "physics/bodies.h"
+#include "physics/effect.h"
 
 #include <limits>
 #include <string>
@@ -51,11 +51,11 @@ struct HeatParams : EffectParams {
     Real surfaceThreshold = 0.5;
     std::vector<HeatSource> sources;
     std::vector<HeatedBody> bodies;
-    void check(const Scene& scene, const Location& at) const override;
+    void check(const SimulationSetup& setup, const Location& at) const override;
 };
 
 std::shared_ptr<const EffectParams> readHeat(Section& s);
-std::unique_ptr<Effect> makeHeat(const EffectParams& params, const Scene& scene, ParticleSet& particles);
+std::unique_ptr<Effect> makeHeat(const EffectParams& params, const SimulationSetup& setup, ParticleSet& particles);
 
 /// Which particles are on the surface, as the heat effect decides it (exposed for tests).
 std::vector<std::uint8_t> surfaceParticles(const ParticleSet& particles, const std::vector<Real>& density,

@@ -21,11 +21,14 @@ constexpr Real kWall = 2;
 // steps, as in IISPH (Ihmsen et al. 2014), converge.
 constexpr Real kRelaxation = 0.5;
 
+// The constant-density pressure kappa / rho of the last step: the next step's warm start.
+constexpr Attribute<Real> kPressure{"_pressure", false};
+
 }  // namespace
 
 PressureDFSPH::PressureDFSPH(const PressureSettings& settings, ParticleSet& particles)
     : m_settings(settings),
-      m_pressure(&particles.addScalar("_pressure", 0, false)) {}
+      m_pressure(&particles.add(kPressure)) {}
 
 void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& particles) {
     const std::size_t n = particles.size();
@@ -51,8 +54,10 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
 }
 
 template <class Target>
-std::size_t PressureDFSPH::solve(StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
-                                 Real tolerance, bool warmStart, Target target) {
+std::size_t PressureDFSPH::solve(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
+                                 bool warmStart, Target target) {
+    const bool density = which == Solve::Density;
+    const Real tolerance = density ? m_settings.densityError : m_settings.divergenceError;
     const std::size_t n = particles.size();
     if (n == 0) return 0;
     const Real dt = ctx.dt;
@@ -96,10 +101,10 @@ std::size_t PressureDFSPH::solve(StepContext& ctx, ParticleSet& particles, std::
         if ((converged && iteration >= std::size_t(m_settings.minIterations)) ||
             iteration >= std::size_t(m_settings.maxIterations)) {
             if (!converged) {
-                ++(&pressure == m_pressure ? ctx.stats.pressureCapHits : ctx.stats.divergenceCapHits);
+                ++(density ? ctx.stats.pressureCapHits : ctx.stats.divergenceCapHits);
                 ctx.stats.warn(fmt::format("step {}: {} solve stopped at {} iterations (mean error {:.3g} > {:.3g}); "
                                            "lower simulation.time_step.max or raise simulation.pressure.max_iterations",
-                                           ctx.step, &pressure == m_pressure ? "constant-density" : "divergence-free",
+                                           ctx.step, density ? "constant-density" : "divergence-free",
                                            iteration, meanError, tolerance));
             }
             break;
@@ -134,11 +139,7 @@ void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& partic
             // Impulse on the body: the opposite of what the body gave particle i.
             const Vec3 j = dt * m[i] * kWall * ctx.restDensity[i] * ctx.boundary.volume[k] * s[i] *
                            ctx.kernel.gradW(x[i] - ctx.boundary.x[k]);
-            const std::uint32_t b = ctx.boundary.body[k];
-            const BodyMotion& motion = ctx.boundary.motion[b];
-            ctx.loads.impulse[b] += j;
-            ctx.loads.angularImpulse[b] +=
-                (ctx.boundary.x[k] - (motion.centre + motion.offset(ctx.time + dt))).cross(j);
+            ctx.loads.add(ctx.boundary, k, j, ctx.time + dt);
         }
     }
 }
@@ -146,7 +147,7 @@ void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& partic
 void PressureDFSPH::solveDensity(StepContext& ctx, ParticleSet& particles, bool firstPass) {
     const Real dt = ctx.dt;
     // rho* - rho_0 = rho + dt Drho/Dt - rho_0 [BK17 Eq. 8]
-    ctx.stats.pressureIterations += solve(ctx, particles, *m_pressure, m_settings.densityError, firstPass,
+    ctx.stats.pressureIterations += solve(Solve::Density, ctx, particles, *m_pressure, firstPass,
                                           [&](std::size_t i, Real rate) {
                                               return ctx.density[i] + dt * rate - ctx.restDensity[i];
                                           });
@@ -159,7 +160,7 @@ void PressureDFSPH::solveDivergence(StepContext& ctx, ParticleSet& particles) {
     // and at 3.8 m/s with the complementarity residual; starting from zero it comes to rest.
     m_pressureV.assign(particles.size(), 0);
     // dt Drho/Dt: the density change the rate would cause over one step [BK17 Eq. 9]
-    ctx.stats.divergenceIterations += solve(ctx, particles, m_pressureV, m_settings.divergenceError, false,
+    ctx.stats.divergenceIterations += solve(Solve::Divergence, ctx, particles, m_pressureV, false,
                                             [&](std::size_t, Real rate) { return dt * rate; });
 }
 

@@ -7,7 +7,7 @@
 namespace ganache {
 
 /// The constant-density and divergence-free solves. The constant-density pressure kappa / rho is kept per
-/// particle as the uncached attribute `_pressure` to warm-start the next step. Pressures stay >= 0 (a fluid
+/// particle as an uncached attribute (kPressure in pressure_dfsph.cpp) to warm-start the next step. Pressures stay >= 0 (a fluid
 /// pushes, it never pulls), so each solve is a projected, relaxed Jacobi iteration.
 class PressureDFSPH {
 public:
@@ -23,10 +23,12 @@ public:
     void solveDivergence(StepContext& ctx, ParticleSet& particles);
 
 private:
+    enum class Solve { Density, Divergence };
     // The shared iteration: `target(i, Drho/Dt)` is the signed density error [kg/m^3] particle i must remove;
-    // stops when the mean complementarity residual relative to rho_0 is below `tolerance`. Returns the iterations.
+    // stops when the mean complementarity residual relative to rho_0 is below the solve's tolerance. Returns the
+    // iterations.
     template <class Target>
-    std::size_t solve(StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure, Real tolerance,
+    std::size_t solve(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
                       bool warmStart, Target target);
 
     // Adds the impulse the pressures `s` gave through the boundary to each body's load.

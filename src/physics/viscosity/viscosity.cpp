@@ -1,7 +1,10 @@
 #include "physics/viscosity/viscosity.h"
 
 #include "core/parallel.h"
-#include "scene/scene.h"
+#include "core/attributes.h"
+#include "core/byte_stream.h"
+#include "physics/setup.h"
+#include "scene/section.h"
 #include "physics/viscosity/viscosity_explicit.h"
 #include "physics/viscosity/viscosity_takahashi2015.h"
 #include "physics/viscosity/viscosity_weiler2018.h"
@@ -12,7 +15,13 @@
 namespace ganache {
 
 namespace {
+
 constexpr Real kTwoDPlus4 = 10;  // 2 (d + 2) with d = 3
+
+// The change of velocity of the latest pass: the warm start of the next step, and what a later coupled pass of the
+// same step takes back.
+constexpr Attribute<Vec3> kChange{"_viscosity_dv", false};
+
 }  // namespace
 
 Real fieldDot(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
@@ -56,12 +65,14 @@ ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& preco
     return pass;
 }
 
-ParticleViscosity::ParticleViscosity(const ViscosityParams& params, const Scene& scene, ParticleSet& particles) {
+ParticleViscosity::ParticleViscosity(const ViscosityParams& params, const SimulationSetup& setup,
+                                     ParticleSet& particles) {
     if (params.mu) {
         m_mu = *params.mu;
         return;
     }
-    const std::vector<Material> sources = scene.sourceMaterials();
+    std::vector<Material> sources;
+    for (const FluidSource& s : setup.sources) sources.push_back(s.material);
     std::set<Real> distinct;
     bool laws = false;
     for (const auto& m : sources) {
@@ -69,25 +80,25 @@ ParticleViscosity::ParticleViscosity(const ViscosityParams& params, const Scene&
         laws |= m.law.has_value();
     }
     // Laws of viscosity over temperature apply where particles have a temperature, i.e. with the heat effect.
-    laws = laws && scene.findEffect("heat");
+    laws = laws && setup.findEffect("heat");
     m_mu = sources.front().mu;
     if (distinct.size() == 1 && !laws) return;
     // Viscosity varies: each particle carries its own, from its source's material (and temperature).
-    if (sources.size() > 1 && !particles.findScalar("fluid"))
+    if (sources.size() > 1 && !particles.find(attribute::kFluid))
         throw std::runtime_error("viscosity: the particles do not say which fluid they belong to; sample the scene "
                                  "again with this version of ganache");
     for (const auto& m : sources) {
         m_sourceMu.push_back(m.mu);
         m_sourceLaw.push_back(laws ? m.law : std::nullopt);
     }
-    m_perParticle = &particles.addScalar("viscosity");
+    m_perParticle = &particles.add(attribute::kViscosity);
     refresh(particles);
 }
 
 void ParticleViscosity::refresh(const ParticleSet& particles) {
     if (!m_perParticle) return;
-    const std::vector<Real>* source = particles.findScalar("fluid");
-    const std::vector<Real>* temperature = particles.findScalar("temperature");
+    const std::vector<Real>* source = particles.find(attribute::kFluid);
+    const std::vector<Real>* temperature = particles.find(attribute::kTemperature);
     auto& mu = *m_perParticle;
     forEachParticle(particles.size(), [&](std::size_t i) {
         const std::size_t s = sourceIndex(source, i);
@@ -96,9 +107,23 @@ void ParticleViscosity::refresh(const ParticleSet& particles) {
     }, 4096);
 }
 
-ViscosityMethod::ViscosityMethod(const ViscosityParams& params, const Scene& scene, ParticleSet& particles)
-    : m_params(params), m_mu(params, scene, particles),
-      m_dv(&particles.addVector("_viscosity_dv", Vec3::Zero(), false)) {}
+ViscosityMethod::ViscosityMethod(const ViscosityParams& params, const SimulationSetup& setup, ParticleSet& particles)
+    : m_params(params), m_mu(params, setup, particles), m_dv(&particles.add(kChange)) {}
+
+std::vector<Counter> ViscosityMethod::counters(std::size_t) const {
+    return {{"solves", double(m_solves)},
+            {"iterations_per_solve", m_solves ? double(m_iterations) / double(m_solves) : 0.0},
+            {"cap_hits", double(m_capHits)},
+            {"worst_residual", m_worstResidual}};
+}
+
+void ViscosityMethod::save(ByteWriter& out) const {
+    out(m_solves), out(m_iterations), out(m_capHits), out(m_worstResidual);
+}
+
+void ViscosityMethod::restore(ByteReader& in) {
+    in(m_solves), in(m_iterations), in(m_capHits), in(m_worstResidual);
+}
 
 Real ViscosityMethod::pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
                                       const Vec3& xij) const {
@@ -179,11 +204,11 @@ void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
         v[i] = m_out[i];
     });
     if (sticky()) addBoundaryLoads(ctx, particles, firstPass);
-    ctx.stats.viscositySolves += 1;
-    ctx.stats.viscosityIterations += m_last.iterations;
-    ctx.stats.viscosityWorstResidual = std::max(ctx.stats.viscosityWorstResidual, m_last.residual);
+    m_solves += 1;
+    m_iterations += m_last.iterations;
+    m_worstResidual = std::max(m_worstResidual, m_last.residual);
     if (m_last.residual > m_params.tolerance) {
-        ++ctx.stats.viscosityCapHits;
+        ++m_capHits;
         ctx.stats.warn(capMessage(ctx, m_last));
     }
 }
@@ -193,11 +218,7 @@ void ViscosityMethod::addBoundaryLoads(StepContext& ctx, const ParticleSet& part
     // unit mass with the new velocities; the body receives the opposite. Sequential: a deterministic sum.
     // A later coupling pass replaces the earlier one's change of velocity, so it replaces its loads too;
     // counting every pass put a floor's mean force at 2.4 times the weight of the chocolate bunny on it.
-    if (!firstPass)
-        for (std::size_t b = 0; b < m_passLoads.impulse.size(); ++b) {
-            ctx.loads.impulse[b] -= m_passLoads.impulse[b];
-            ctx.loads.angularImpulse[b] -= m_passLoads.angularImpulse[b];
-        }
+    if (!firstPass) ctx.loads.subtract(m_passLoads);
     m_passLoads.clear(ctx.loads.impulse.size());
     const auto& x = particles.x();
     const auto& v = particles.v();
@@ -207,26 +228,57 @@ void ViscosityMethod::addBoundaryLoads(StepContext& ctx, const ParticleSet& part
             const Vec3 xik = x[i] - ctx.boundary.x[k];
             const Vec3 j = -ctx.dt * m[i] * boundaryCoefficient(ctx, i, k, xik) * xik.dot(v[i] - ctx.boundary.v[k]) *
                            ctx.kernel.gradW(xik);
-            const std::uint32_t b = ctx.boundary.body[k];
-            const BodyMotion& motion = ctx.boundary.motion[b];
-            m_passLoads.impulse[b] += j;
-            m_passLoads.angularImpulse[b] +=
-                (ctx.boundary.x[k] - (motion.centre + motion.offset(ctx.time + ctx.dt))).cross(j);
+            m_passLoads.add(ctx.boundary, k, j, ctx.time + ctx.dt);
         }
-    for (std::size_t b = 0; b < m_passLoads.impulse.size(); ++b) {
-        ctx.loads.impulse[b] += m_passLoads.impulse[b];
-        ctx.loads.angularImpulse[b] += m_passLoads.angularImpulse[b];
-    }
+    ctx.loads.add(m_passLoads);
 }
 
-std::unique_ptr<Effect> makeViscosity(const EffectParams& params, const Scene& scene, ParticleSet& particles) {
-    const auto& p = dynamic_cast<const ViscosityParams&>(params);
+std::shared_ptr<const EffectParams> readViscosity(Section& s) {
+    using Method = ViscosityParams::Method;
+    using Preconditioner = ViscosityParams::Preconditioner;
+    auto p = std::make_shared<ViscosityParams>();
+    const std::string method = s.choice("method", "weiler2018", {"weiler2018", "explicit", "takahashi2015"});
+    p->method = method == "explicit" ? Method::Explicit : method == "takahashi2015" ? Method::Takahashi2015
+                                                                                     : Method::Weiler2018;
+    if (s.has("mu")) p->mu = s.number("mu", std::nullopt, "Pa s", Bounds::nonNegative());
+    p->boundaryMu = s.number("boundary_mu", p->boundaryMu, "Pa s", Bounds::nonNegative());
+    if (p->method == Method::Explicit) {
+        // Forward Euler has no solve: its only setting is how many sub-steps one step may take.
+        for (const char* key : {"tolerance", "preconditioner", "warm_start"})
+            if (s.has(key))
+                s.failAtKey(key, fmt::format("{}.{} is a setting of the implicit solvers; method 'explicit' has no "
+                                             "solve",
+                                             s.path(), key),
+                            "remove it, or choose method: weiler2018");
+        p->maxIterations = s.integer("max_iterations", 10000, 1, 100000000);
+        return p;
+    }
+    p->tolerance = s.number("tolerance", p->tolerance, "relative residual", Bounds{0, 1, true, true});
+    p->maxIterations = s.integer("max_iterations", p->maxIterations, 1, 100000);
+    const bool weiler = p->method == Method::Weiler2018;
+    const std::string preconditioner =
+        s.choice("preconditioner", weiler ? "rigid" : "block_jacobi", {"rigid", "block_jacobi", "none"});
+    if (preconditioner == "rigid" && !weiler)
+        s.fail("preconditioner",
+               fmt::format("{}.preconditioner 'rigid' works on the system of weiler2018 only: the rigid motions are "
+                           "not free of viscous forces in {}'s",
+                           s.path(), method),
+               "use block_jacobi or none");
+    p->preconditioner = preconditioner == "none"           ? Preconditioner::None
+                        : preconditioner == "block_jacobi" ? Preconditioner::BlockJacobi
+                                                           : Preconditioner::Rigid;
+    p->warmStart = s.boolean("warm_start", p->warmStart);
+    return p;
+}
+
+std::unique_ptr<Effect> makeViscosity(const EffectParams& params, const SimulationSetup& setup, ParticleSet& particles) {
+    const auto& p = static_cast<const ViscosityParams&>(params);
     switch (p.method) {
-    case ViscosityParams::Method::Explicit: return std::make_unique<ViscosityExplicit>(p, scene, particles);
-    case ViscosityParams::Method::Takahashi2015: return std::make_unique<ViscosityTakahashi2015>(p, scene, particles);
+    case ViscosityParams::Method::Explicit: return std::make_unique<ViscosityExplicit>(p, setup, particles);
+    case ViscosityParams::Method::Takahashi2015: return std::make_unique<ViscosityTakahashi2015>(p, setup, particles);
     case ViscosityParams::Method::Weiler2018: break;
     }
-    return std::make_unique<ViscosityWeiler2018>(p, scene, particles);
+    return std::make_unique<ViscosityWeiler2018>(p, setup, particles);
 }
 
 }  // namespace ganache

@@ -13,8 +13,8 @@ namespace ganache {
 /// sub-steps of one step; a step that needs more stops the run with the number it needs.
 class ViscosityExplicit final : public ViscosityMethod {
 public:
-    ViscosityExplicit(const ViscosityParams& params, const Scene& scene, ParticleSet& particles)
-        : ViscosityMethod(params, scene, particles) {}
+    ViscosityExplicit(const ViscosityParams& params, const SimulationSetup& setup, ParticleSet& particles)
+        : ViscosityMethod(params, setup, particles) {}
 
     /// The stable sub-step dt_s of the current particles [s] (infinite when nothing couples).
     Real stableStep(const StepContext& ctx, const ParticleSet& particles) const;

@@ -18,8 +18,8 @@ namespace ganache {
 /// Preconditioners: block Jacobi (the exact 3x3 diagonal blocks of the system) or none (the mass only).
 class ViscosityTakahashi2015 final : public ViscosityMethod {
 public:
-    ViscosityTakahashi2015(const ViscosityParams& params, const Scene& scene, ParticleSet& particles)
-        : ViscosityMethod(params, scene, particles) {}
+    ViscosityTakahashi2015(const ViscosityParams& params, const SimulationSetup& setup, ParticleSet& particles)
+        : ViscosityMethod(params, setup, particles) {}
 
     /// The SPH strain rate D_i of the velocity field `in`, for every particle.
     static void strainRate(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,

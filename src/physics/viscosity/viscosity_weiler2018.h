@@ -41,8 +41,8 @@ private:
 /// symmetric positive definite.
 class ViscosityWeiler2018 final : public ViscosityMethod {
 public:
-    ViscosityWeiler2018(const ViscosityParams& params, const Scene& scene, ParticleSet& particles)
-        : ViscosityMethod(params, scene, particles) {}
+    ViscosityWeiler2018(const ViscosityParams& params, const SimulationSetup& setup, ParticleSet& particles)
+        : ViscosityMethod(params, setup, particles) {}
 
 protected:
     ViscosityPass solve(StepContext& ctx, const ParticleSet& particles, std::vector<Vec3>& out) override;

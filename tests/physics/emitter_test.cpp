@@ -1,7 +1,9 @@
 // Emitters: how much fluid a nozzle adds, where and how fast, including a nozzle that moves; and a stream that
 // backs up against a floor stays stable.
 
-#include "solver_test_util.h"
+#include "physics/gravity.h"
+#include "physics/viscosity/viscosity.h"
+#include "world.h"
 
 #include <gtest/gtest.h>
 
@@ -15,43 +17,49 @@ using namespace ganache::testing;
 namespace {
 
 // A downward nozzle (circle of radius 2 cm, particle radius 5 mm: 9 sites per layer) in zero gravity, so the
-// stream flies freely and its particles can be traced back to where and when they left.
-std::string freeStream(const std::string& emitterExtra, const std::string& effects = "") {
-    return R"(particles: {radius: 0.005}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-emitters:
-  - name: nozzle
-    material: honey
-    circle: {radius: 0.02}
-    position: [0, 0.5, 0]
-    direction: [0, -1, 0]
-    speed: 0.5
-)" + emitterExtra + effects;
+// stream flies freely and its particles can be traced back to where and when they left. It runs from t = 0 to 2 s,
+// longer than any test here.
+EmitterSpec freeNozzle() {
+    EmitterSpec e;
+    e.name = "nozzle";
+    e.material = preset("honey");
+    e.nozzle = CircleNozzle{0.02};
+    e.position = Vec3(0, 0.5, 0);
+    e.direction = Vec3(0, -1, 0);
+    e.speed = 0.5;
+    e.end = 2;
+    return e;
 }
+
+const std::vector<EmitterReport>& reports(const Simulation& sim) { return sim.findEffect<Emitters>()->reports(); }
 
 }  // namespace
 
 TEST(Emitter, LayersLeaveOneSpacingApartBetweenStartAndEnd) {
-    const Scene scene = sceneFromText("emit_count", freeStream("    start: 0.1\n    end: 0.3\n",
-                                                               "simulation: {time_step: {fixed: 0.001}}\n"));
-    ASSERT_EQ(nozzleSites(scene.emitters[0], scene.particleRadius).size(), 9u);
-    Simulation sim = simulationOf(scene);
+    EmitterSpec nozzle = freeNozzle();
+    nozzle.start = 0.1;
+    nozzle.end = 0.3;
+    World world(0.005);
+    world.emitter(nozzle);
+    world.setup.timeStep.fixedDt = 0.001;
+    ASSERT_EQ(nozzleSites(nozzle, 0.005).size(), 9u);
+    Simulation sim = world.simulation();
     ASSERT_EQ(sim.particles().size(), 0u);
     sim.advanceTo(0.1);
     EXPECT_EQ(sim.particles().size(), 0u) << "nothing leaves before start";
     sim.advanceTo(0.5);
     // 0.2 s at 0.5 m/s is 0.1 m of stream: a layer at the start and one per 1 cm after it, 11 layers.
     EXPECT_EQ(sim.particles().size(), 11u * 9u) << "nothing leaves after end";
-    EXPECT_EQ(sim.stats().emittedParticles, 99u);
-    ASSERT_EQ(sim.emitterReports().size(), 1u);
-    EXPECT_EQ(sim.emitterReports()[0].emitted, 99u);
-    EXPECT_EQ(sim.emitterReports()[0].blocked, 0u);
+    EXPECT_EQ(sim.stats().addedParticles, 99u);
+    ASSERT_EQ(reports(sim).size(), 1u);
+    EXPECT_EQ(reports(sim)[0].emitted, 99u);
+    EXPECT_EQ(reports(sim)[0].blocked, 0u);
     // Ids are unique.
     std::set<std::uint64_t> ids(sim.particles().id().begin(), sim.particles().id().end());
     EXPECT_EQ(ids.size(), sim.particles().size());
     // The emitted volume matches the flow rate the scene reports: 9 sites x (1 cm)^2 x 0.5 m/s x 0.2 s, plus the
     // layer at the start.
-    const Real rate = emitterFlowRate(scene.emitters[0], scene.particleRadius);
+    const Real rate = emitterFlowRate(nozzle, 0.005);
     EXPECT_NEAR(rate, 9 * 1e-4 * 0.5, 1e-15);
     EXPECT_NEAR(Real(sim.particles().size()) * 1e-6, rate * 0.2 + 9e-6, 1e-12);
 }
@@ -59,8 +67,10 @@ TEST(Emitter, LayersLeaveOneSpacingApartBetweenStartAndEnd) {
 TEST(Emitter, AFreeStreamKeepsItsSpeedAndSpacing) {
     // Layers at the lattice spacing are at most at rest density, so neither pressure solve nor viscosity (uniform
     // velocity) has anything to correct: the stream must fly at the nozzle's speed with its layers 2r apart.
-    const Scene scene = sceneFromText("emit_free", freeStream("", "effects: {viscosity: {}}\n"));
-    Simulation sim = simulationOf(scene);
+    World world(0.005);
+    world.emitter(freeNozzle());
+    world.effect<ViscosityParams>("viscosity");
+    Simulation sim = world.simulation();
     sim.advanceTo(0.2);
     const ParticleSet& p = sim.particles();
     ASSERT_GT(p.size(), 9u * 10);
@@ -80,12 +90,11 @@ TEST(Emitter, AMovingNozzleLaysItsStreamAlongItsPath) {
     // The nozzle slides 0.2 m along x in 0.2 s (1 m/s). In zero gravity, every particle goes on with the velocity
     // it left with: 0.5 m/s down plus the nozzle's 1 m/s along x. So a particle's height says its age, and its x
     // says where the nozzle was when it left: x = x_nozzle(t_e) + 1 m/s * age, i.e. x = t_now for t_now < 0.2 s.
-    const Scene scene = sceneFromText("emit_moving", freeStream(R"(    motion:
-      keyframes:
-        - {time: 0, offset: [0, 0, 0]}
-        - {time: 0.2, offset: [0.2, 0, 0]}
-)"));
-    Simulation sim = simulationOf(scene);
+    EmitterSpec nozzle = freeNozzle();
+    nozzle.motion.keyframes = {{0, Vec3::Zero()}, {0.2, Vec3(0.2, 0, 0)}};
+    World world(0.005);
+    world.emitter(nozzle);
+    Simulation sim = world.simulation();
     sim.advanceTo(0.15);
     const ParticleSet& p = sim.particles();
     ASSERT_GT(p.size(), 9u * 5);
@@ -102,18 +111,19 @@ TEST(Emitter, AMovingNozzleLaysItsStreamAlongItsPath) {
 
 TEST(Emitter, ARotatingNozzleTurnsItsStream) {
     // A horizontal nozzle turning about y at 2 rad/s: each particle leaves along the direction the nozzle had.
-    const Scene scene = sceneFromText("emit_rotating", R"(particles: {radius: 0.005}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-emitters:
-  - name: sprinkler
-    rectangle: {width: 0.01, height: 0.01}
-    position: [0.05, 0, 0]
-    direction: [1, 0, 0]
-    speed: 1
-    motion: {rotation: {axis: [0, 1, 0], centre: [0, 0, 0], angular_velocity: 2}}
-)");
-    ASSERT_EQ(nozzleSites(scene.emitters[0], scene.particleRadius).size(), 1u);
-    Simulation sim = simulationOf(scene);
+    EmitterSpec sprinkler;
+    sprinkler.name = "sprinkler";
+    sprinkler.material = preset("water");
+    sprinkler.nozzle = RectangleNozzle{0.01, 0.01};
+    sprinkler.position = Vec3(0.05, 0, 0);
+    sprinkler.direction = Vec3(1, 0, 0);
+    sprinkler.speed = 1;
+    sprinkler.end = 2;
+    sprinkler.motion.angularVelocity = 2;
+    ASSERT_EQ(nozzleSites(sprinkler, 0.005).size(), 1u);
+    World world(0.005);
+    world.emitter(sprinkler);
+    Simulation sim = world.simulation();
     sim.advanceTo(0.3);
     const ParticleSet& p = sim.particles();
     ASSERT_GT(p.size(), 20u);
@@ -131,15 +141,18 @@ TEST(Emitter, AStreamBackingUpOnAFloorSkipsBlockedSitesAndStaysStable) {
     // slows near the nozzle, so fluid still covers some sites when the next layer is due. The emitter must
     // skip those (and say so) rather than stack particles onto them, and the pile stays finite, above the floor
     // and never compressed beyond 10 % (as in the stability suite).
-    const Scene scene = sceneFromText("emit_pile", R"(particles: {radius: 0.005}
-domain: {min: [-0.2, -0.1, -0.2], max: [0.2, 0.3, 0.2]}
-boundaries: [{name: floor, plane: {point: [0, 0, 0], normal: [0, 1, 0]}}]
-emitters:
-  - {name: nozzle, material: honey, circle: {radius: 0.02}, position: [0, 0.06, 0], direction: [0, -1, 0], speed: 0.3}
-effects: {gravity: {}, viscosity: {mu: 20, boundary_mu: 20}}
-frames: {end: 25}
-)");
-    Simulation sim = simulationOf(scene);
+    EmitterSpec nozzle = freeNozzle();
+    nozzle.position = Vec3(0, 0.06, 0);
+    nozzle.speed = 0.3;
+    nozzle.end = 1;  // the last frame
+    World world(0.005, Vec3(-0.2, -0.1, -0.2), Vec3(0.2, 0.3, 0.2));
+    world.plane("floor");
+    world.emitter(nozzle);
+    world.effect<GravityParams>("gravity");
+    ViscosityParams& v = world.effect<ViscosityParams>("viscosity");
+    v.mu = 20;
+    v.boundaryMu = 20;
+    Simulation sim = world.simulation();
     sim.advanceTo(1);
     // A layer emitted in the last step sits where it was placed, up to 3/4 of a spacing from older fluid, and
     // has not met a constant-density solve yet: only particles that have are held to the 10 %.
@@ -147,7 +160,7 @@ frames: {end: 25}
     sim.step(0.005);
     const ParticleSet& p = sim.particles();
     ASSERT_GT(p.size(), 0u);
-    const auto& rho0 = *p.findScalar("_rest_density");
+    const auto& rho0 = sim.restDensity();
     for (std::size_t i = 0; i < p.size(); ++i) {
         ASSERT_TRUE(p.x()[i].allFinite() && p.v()[i].allFinite());
         EXPECT_GT(p.x()[i].y(), 0.0) << "particle " << p.id()[i] << " below the floor";
@@ -157,9 +170,9 @@ frames: {end: 25}
         // Nothing faster than the stream plus a free fall from the nozzle (0.3 m/s, 6 cm: 1.1 m/s), with margin.
         EXPECT_LT(p.v()[i].norm(), 1.5) << "particle " << p.id()[i];
     }
-    std::printf("pile: %zu particles, %zu sites blocked, %zu steps\n", p.size(), sim.emitterReports()[0].blocked,
+    std::printf("pile: %zu particles, %zu sites blocked, %zu steps\n", p.size(), reports(sim)[0].blocked,
                 sim.stats().steps);
-    EXPECT_GT(sim.emitterReports()[0].blocked, 0u) << "the slowed thread should have blocked some sites";
+    EXPECT_GT(reports(sim)[0].blocked, 0u) << "the slowed thread should have blocked some sites";
     EXPECT_EQ(sim.stats().removedParticles, 0u);
     EXPECT_FALSE(sim.stats().warnings.empty());
 }
@@ -167,22 +180,22 @@ frames: {end: 25}
 TEST(Emitter, EmittedFluidTakesItsOwnViscosity) {
     // Water at rest in a box and a honey emitter: the viscosity solve must give each particle its source's mu,
     // the emitted ones included.
-    const Scene scene = sceneFromText("emit_mixed", R"(particles: {radius: 0.005}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids: [{material: water, box: {min: [-0.05, -0.05, -0.05], max: [0.05, 0.05, 0.05]}}]
-emitters:
-  - {name: nozzle, material: honey, circle: {radius: 0.01}, position: [0, 0.3, 0], direction: [0, -1, 0], speed: 0.5}
-effects: {viscosity: {}}
-)");
-    Simulation sim = simulationOf(scene);
+    EmitterSpec nozzle = freeNozzle();
+    nozzle.nozzle = CircleNozzle{0.01};
+    nozzle.position = Vec3(0, 0.3, 0);
+    World world(0.005);
+    world.block(Vec3::Constant(-0.05), Vec3::Constant(0.05), preset("water"));
+    world.emitter(nozzle);
+    world.effect<ViscosityParams>("viscosity");
+    Simulation sim = world.simulation();
     const std::size_t water = sim.particles().size();
     sim.advanceTo(0.05);
     const ParticleSet& p = sim.particles();
     ASSERT_GT(p.size(), water);
-    const auto* mu = p.findScalar("viscosity");
-    const auto* source = p.findScalar("fluid");
+    const auto* mu = p.find(attribute::kViscosity);
+    const auto* source = p.find(attribute::kFluid);
     ASSERT_TRUE(mu && source);
-    const Real honey = scene.emitters[0].material.mu, waterMu = scene.fluids[0].material.mu;
+    const Real honey = preset("honey").mu, waterMu = preset("water").mu;
     std::size_t emitted = 0;
     for (std::size_t i = 0; i < p.size(); ++i) {
         const bool fromEmitter = p.id()[i] >= water;

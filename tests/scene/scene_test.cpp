@@ -1,5 +1,9 @@
 #include "scene/scene.h"
 
+#include "physics/gravity.h"
+
+#include "../physics/drag_effect.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -126,11 +130,28 @@ TEST(Scene, ExplainedSceneLoadsBackToTheSameEffectiveScene) {
         EXPECT_NE(text.find("# m"), std::string::npos) << "units appear as comments";
         const fs::path again = writeTemp(s.name + ".yaml", text);
         const Scene t = loadScene(again, Quality::parse("final"));
-        EXPECT_EQ(s.effective->values, t.effective->values) << text;
+        EXPECT_EQ(effectiveJson(*s.effective), effectiveJson(*t.effective)) << text;
     }
 }
 
 TEST(Scene, DidYouMeanPicksTheClosestName) {
     EXPECT_EQ(closestMatch("viscosty", {"gravity", "viscosity", "heat"}), "viscosity");
     EXPECT_EQ(closestMatch("zzzzzz", {"gravity", "viscosity"}), "");
+}
+
+TEST(Scene, AnEffectRegisteredOutsideReadsItsOwnSection) {
+    // The test-only drag effect (tests/physics/drag_effect.h) is read like a built-in one: its keys, their checks
+    // and the did-you-mean come from its own reader and the Section API.
+    ganache::testing::registerDrag();
+    const Scene s = loadScene(writeTemp("drag.yaml", std::string(kMinimal) + "effects: {drag: {rate: 3}}\n"),
+                              Quality::parse("final"));
+    ASSERT_NE(s.findEffect("drag"), nullptr);
+    EXPECT_EQ(static_cast<const ganache::testing::DragParams&>(*s.findEffect("drag")->params).rate, 3.0);
+    try {
+        loadScene(writeTemp("drag_typo.yaml", std::string(kMinimal) + "effects: {drag: {rat: 3}}\n"),
+                  Quality::parse("final"));
+        FAIL() << "a misspelt key must be refused";
+    } catch (const SceneError& e) {
+        EXPECT_NE(std::string(e.what()).find("did you mean 'rate'"), std::string::npos) << e.what();
+    }
 }

@@ -2,7 +2,9 @@
 // radiation's exponential approach, the sources' fall-off, Reynolds' law, and which particles are surface.
 
 #include "physics/heat/heat.h"
-#include "solver_test_util.h"
+#include "physics/gravity.h"
+#include "physics/viscosity/viscosity.h"
+#include "world.h"
 
 #include <gtest/gtest.h>
 
@@ -16,13 +18,17 @@ using namespace ganache::testing;
 namespace {
 
 // A material with diffusivity D = k / (rho c) = 1e-3 m^2/s, so heat spreads visibly in half a second.
-constexpr const char* kConductor = R"(materials:
-  conductor: {base: water, density: 1000, conductivity: 1000, heat_capacity: 1000}
-)";
+Material conductor() {
+    Material m = preset("water");
+    m.density = 1000;
+    m.conductivity = 1000;
+    m.heatCapacity = 1000;
+    return m;
+}
 
 Real totalHeat(const ParticleSet& p, Real c) {
     Real q = 0;
-    const auto& T = *p.findScalar("temperature");
+    const auto& T = *p.find(attribute::kTemperature);
     for (std::size_t i = 0; i < p.size(); ++i) q += p.mass()[i] * c * T[i];
     return q;
 }
@@ -34,18 +40,16 @@ TEST(Heat, ConductionSpreadsAGaussianAsTheHeatKernel) {
     // with s^2 = s0^2 + 2 D t. The block reaches 4.5 sigma(t) from the centre, where the bump is below 1e-4 of its
     // peak, so the missing infinite medium does not matter. Width (from the second moment) and peak within 2 %,
     // as the issue asks; heat conserved to 1e-10.
-    const Scene scene = sceneFromText("gauss", std::string(kConductor) + R"(particles: {radius: 0.005}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids: [{material: conductor, box: {min: [-0.16, -0.16, -0.16], max: [0.16, 0.16, 0.16]}}]
-effects: {heat: {}}
-simulation: {time_step: {fixed: 0.005}}
-)");
+    World world(0.005);
+    world.block(Vec3::Constant(-0.16), Vec3::Constant(0.16), conductor());
+    world.effect<HeatParams>("heat");
+    world.setup.timeStep.fixedDt = 0.005;
     const Real sigma0 = 0.03, amplitude = 30, base = 20, D = 1e-3, t = 0.25;
-    Sample s = sampleScene(scene);
-    auto& T = s.fluid.addScalar("temperature");
-    for (std::size_t i = 0; i < s.fluid.size(); ++i)
-        T[i] = base + amplitude * std::exp(-s.fluid.x()[i].squaredNorm() / (2 * sigma0 * sigma0));
-    Simulation sim(scene, std::move(s.fluid), s.boundaries);
+    Simulation sim = world.simulation([&](ParticleSet& p) {
+        auto& T = p.add(attribute::kTemperature);
+        for (std::size_t i = 0; i < p.size(); ++i)
+            T[i] = base + amplitude * std::exp(-p.x()[i].squaredNorm() / (2 * sigma0 * sigma0));
+    });
     const Real heat0 = totalHeat(sim.particles(), 1000);
     sim.advanceTo(t);
     const ParticleSet& p = sim.particles();
@@ -53,7 +57,7 @@ simulation: {time_step: {fixed: 0.005}}
     EXPECT_NEAR(totalHeat(p, 1000) / heat0, 1.0, 1e-10);
 
     const Real s2 = sigma0 * sigma0 + 2 * D * t;
-    const auto& Tn = *p.findScalar("temperature");
+    const auto& Tn = *p.find(attribute::kTemperature);
     Real moment = 0, weight = 0, centre = 0, nearest = 1;
     for (std::size_t i = 0; i < p.size(); ++i) {
         const Real excess = Tn[i] - base;
@@ -70,16 +74,16 @@ simulation: {time_step: {fixed: 0.005}}
 
 TEST(Heat, RadiationApproachesTheRoomWithItsTimeConstant) {
     // A lone particle is all surface; Eq. 14 integrated exactly gives T_room + (T0 - T_room) exp(-t / t_r).
-    const Scene scene = sceneFromText("radiation", R"(particles: {radius: 0.01}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids: [{temperature: 80, box: {min: [0, 0, 0], max: [0.02, 0.02, 0.02]}}]
-effects: {heat: {room_temperature: 20, radiation_time: 0.5}}
-)");
-    Simulation sim = simulationOf(scene);
+    World world(0.01);
+    world.block(Vec3(0, 0, 0), Vec3(0.02, 0.02, 0.02), preset("water"), 80);
+    HeatParams& heat = world.effect<HeatParams>("heat");
+    heat.roomTemperature = 20;
+    heat.radiationTime = 0.5;
+    Simulation sim = world.simulation();
     ASSERT_EQ(sim.particles().size(), 1u);
     for (Real t : {0.1, 0.5, 1.3}) {
         sim.advanceTo(t);
-        EXPECT_NEAR((*sim.particles().findScalar("temperature"))[0], 20 + 60 * std::exp(-t / 0.5), 1e-9) << t;
+        EXPECT_NEAR((*sim.particles().find(attribute::kTemperature))[0], 20 + 60 * std::exp(-t / 0.5), 1e-9) << t;
     }
 }
 
@@ -114,16 +118,18 @@ TEST(Heat, SourcesFallOffAsEquation17) {
 
 TEST(Heat, ASourceHeatsASurfaceParticleByItsCatchOverMassAndCapacity) {
     // [Eq. 18]: a lone particle under a lamp gains A_p Q / (m c) kelvin per second, A_p = pi r^2.
-    const Scene scene = sceneFromText("lamp", R"(particles: {radius: 0.01}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids: [{material: honey, temperature: 20, box: {min: [0, 0, 0], max: [0.02, 0.02, 0.02]}}]
-effects: {heat: {sources: [{sphere: {centre: [0.01, 0.11, 0.01]}, intensity: 1000, radius: 0.1}]}}
-)");
-    Simulation sim = simulationOf(scene);
+    World world(0.01);
+    world.block(Vec3(0, 0, 0), Vec3(0.02, 0.02, 0.02), preset("honey"), 20);
+    HeatSource lamp;
+    lamp.point = Vec3(0.01, 0.11, 0.01);
+    lamp.intensity = 1000;
+    lamp.radius = 0.1;
+    world.effect<HeatParams>("heat").sources.push_back(lamp);
+    Simulation sim = world.simulation();
     const Real m = sim.particles().mass()[0], c = 2400;
     sim.advanceTo(0.2);
     const Real expected = 20 + 0.2 * M_PI * 0.01 * 0.01 * 500 / (m * c);  // 0.1 m away: Q = 500 W/m^2
-    EXPECT_NEAR((*sim.particles().findScalar("temperature"))[0], expected, 1e-9);
+    EXPECT_NEAR((*sim.particles().find(attribute::kTemperature))[0], expected, 1e-9);
 }
 
 TEST(Heat, ReynoldsLawAndRamps) {
@@ -148,14 +154,11 @@ TEST(Heat, ReynoldsLawAndRamps) {
 }
 
 TEST(Heat, SurfaceIsTheOuterLayerAndLoneParticles) {
-    const Scene scene = sceneFromText("surface", R"(particles: {radius: 0.01}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids:
-  - {box: {min: [0, 0, 0], max: [0.2, 0.2, 0.2]}}
-  - {box: {min: [0.5, 0.5, 0.5], max: [0.52, 0.52, 0.52]}}
-effects: {heat: {}}
-)");
-    Simulation sim = simulationOf(scene);
+    World world(0.01);
+    world.block(Vec3(0, 0, 0), Vec3(0.2, 0.2, 0.2));
+    world.block(Vec3(0.5, 0.5, 0.5), Vec3(0.52, 0.52, 0.52));
+    world.effect<HeatParams>("heat");
+    Simulation sim = world.simulation();
     const ParticleSet& p = sim.particles();
     const auto surface = surfaceParticles(p, sim.density(), sim.fluidNeighbours(), sim.kernel(), 0.5);
     std::size_t outer = 0;
@@ -177,17 +180,18 @@ TEST(Heat, AWarmPlateConductsIntoTheFluidTouchingIt) {
     // steps are monotone) and fall with height. The bottom layer, 1.5 lattice spacings above the plate, warms by
     // 6 K in 0.2 s (a semi-infinite medium touching the plate would be at 38 C there: the boundary particles
     // conduct like a fluid layer one spacing below the fluid, so the contact is a little insulated).
-    const Scene scene = sceneFromText("plate", std::string(kConductor) + R"(particles: {radius: 0.005}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids: [{material: conductor, temperature: 20, box: {min: [-0.05, 0.01, -0.05], max: [0.05, 0.11, 0.05]}}]
-boundaries: [{name: plate, plane: {point: [0, 0, 0], normal: [0, 1, 0]}}]
-effects: {heat: {bodies: {plate: {temperature: 60}}}}
-)");
-    Simulation sim = simulationOf(scene);
+    World world(0.005);
+    world.block(Vec3(-0.05, 0.01, -0.05), Vec3(0.05, 0.11, 0.05), conductor(), 20);
+    world.plane("plate");
+    HeatedBody plate;
+    plate.body = "plate";
+    plate.temperature = 60;
+    world.effect<HeatParams>("heat").bodies.push_back(plate);
+    Simulation sim = world.simulation();
     const Real heat0 = totalHeat(sim.particles(), 1000);
     sim.advanceTo(0.2);
     const ParticleSet& p = sim.particles();
-    const auto& T = *p.findScalar("temperature");
+    const auto& T = *p.find(attribute::kTemperature);
     Real low = 0, high = 0;
     std::size_t nl = 0, nh = 0;
     for (std::size_t i = 0; i < p.size(); ++i) {
@@ -204,25 +208,23 @@ effects: {heat: {bodies: {plate: {temperature: 60}}}}
 
 TEST(Heat, OnlyScenesWithHeatHaveTemperaturesOrMelt) {
     // Chocolate has a melting law, but without `heat:` there is no temperature and its viscosity is one number.
-    const std::string body = R"(particles: {radius: 0.01}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids: [{material: chocolate, box: {min: [0, 0, 0], max: [0.1, 0.1, 0.1]}}]
-)";
-    Simulation cold = simulationOf(sceneFromText("cold", body + "effects: {viscosity: {}}\n"));
+    World coldWorld(0.01);
+    coldWorld.block(Vec3(0, 0, 0), Vec3(0.1, 0.1, 0.1), preset("chocolate"));
+    coldWorld.effect<ViscosityParams>("viscosity");
+    Simulation cold = coldWorld.simulation();
     cold.step();
-    EXPECT_EQ(cold.particles().findScalar("temperature"), nullptr);
-    EXPECT_EQ(cold.particles().findScalar("viscosity"), nullptr);
-    EXPECT_EQ(cold.stats().time.heat, 0.0);
+    EXPECT_EQ(cold.particles().find(attribute::kTemperature), nullptr);
+    EXPECT_EQ(cold.particles().find(attribute::kViscosity), nullptr);
+    EXPECT_EQ(cold.effectNames(), std::vector<std::string>{"viscosity"});
     // With heat, every particle's viscosity follows its temperature (20 C: the law's 5e6 Pa s; 35 C: far less).
-    const std::string warmBody = R"(particles: {radius: 0.01}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-fluids: [{material: chocolate, temperature: 35, box: {min: [0, 0, 0], max: [0.1, 0.1, 0.1]}}]
-effects: {viscosity: {}, heat: {}}
-)";
-    Simulation warm = simulationOf(sceneFromText("warm", warmBody));
+    World warmWorld(0.01);
+    warmWorld.block(Vec3(0, 0, 0), Vec3(0.1, 0.1, 0.1), preset("chocolate"), 35);
+    warmWorld.effect<ViscosityParams>("viscosity");
+    warmWorld.effect<HeatParams>("heat");
+    Simulation warm = warmWorld.simulation();
     warm.step();
-    const auto* T = warm.particles().findScalar("temperature");
-    const auto* mu = warm.particles().findScalar("viscosity");
+    const auto* T = warm.particles().find(attribute::kTemperature);
+    const auto* mu = warm.particles().find(attribute::kViscosity);
     ASSERT_TRUE(T && mu);
     const ViscosityLaw& law = *findPreset("chocolate")->law;
     for (std::size_t i = 0; i < mu->size(); ++i) EXPECT_DOUBLE_EQ((*mu)[i], law.at((*T)[i]));
@@ -232,25 +234,23 @@ effects: {viscosity: {}, heat: {}}
 TEST(Heat, ConductionTooFastForTheStepIsSubSteppedAndStaysBounded) {
     // k = 1e5 W/(m K): one 5 ms step would overshoot by far; sub-steps keep every temperature within the range
     // it started in (explicit steps within the bound are weighted means), and the run says how many it took.
-    const Scene scene = sceneFromText("fast_conduction", R"(particles: {radius: 0.01}
-domain: {min: [-1, -1, -1], max: [1, 1, 1]}
-materials: {superconductor: {base: water, conductivity: 1.0e5, heat_capacity: 1000, density: 1000}}
-fluids:
-  - {material: superconductor, temperature: 0, box: {min: [0, 0, 0], max: [0.1, 0.2, 0.2]}}
-  - {material: superconductor, temperature: 100, box: {min: [0.1, 0, 0], max: [0.2, 0.2, 0.2]}}
-effects: {heat: {}}
-simulation: {time_step: {fixed: 0.005}}
-)");
-    Simulation sim = simulationOf(scene);
+    Material superconductor = conductor();
+    superconductor.conductivity = 1.0e5;
+    World world(0.01);
+    world.block(Vec3(0, 0, 0), Vec3(0.1, 0.2, 0.2), superconductor, 0);
+    world.block(Vec3(0.1, 0, 0), Vec3(0.2, 0.2, 0.2), superconductor, 100);
+    world.effect<HeatParams>("heat");
+    world.setup.timeStep.fixedDt = 0.005;
+    Simulation sim = world.simulation();
     const Real heat0 = totalHeat(sim.particles(), 1000);
     sim.advanceTo(0.05);
-    EXPECT_GT(sim.stats().heatSubstepsMax, 1u);
+    EXPECT_GT(sim.counter("heat", "substeps_max"), 1);
     EXPECT_FALSE(sim.stats().warnings.empty());
-    const auto& T = *sim.particles().findScalar("temperature");
+    const auto& T = *sim.particles().find(attribute::kTemperature);
     for (Real t : T) {
         EXPECT_GE(t, -1e-9);
         EXPECT_LE(t, 100 + 1e-9);
     }
     EXPECT_NEAR(totalHeat(sim.particles(), 1000) / heat0, 1.0, 1e-10);
-    std::printf("%zu sub-steps at most in one step\n", sim.stats().heatSubstepsMax);
+    std::printf("%.0f sub-steps at most in one step\n", sim.counter("heat", "substeps_max"));
 }

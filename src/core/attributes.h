@@ -1,0 +1,18 @@
+#pragma once
+// The per-particle attributes that several parts of ganache share, declared once. An attribute only one effect uses
+// is declared in that effect's own file.
+
+#include "core/particles.h"
+
+namespace ganache::attribute {
+
+/// Index of the particle's source of fluid (SimulationSetup::sources); present only when there are several.
+inline constexpr Attribute<Real> kFluid{"fluid"};
+/// Temperature [C]; present only with the heat effect.
+inline constexpr Attribute<Real> kTemperature{"temperature"};
+/// Dynamic viscosity [Pa s]; present only when the viscosity effect's value differs between particles.
+inline constexpr Attribute<Real> kViscosity{"viscosity"};
+/// Rest density rho_0 [kg/m^3], from the mass and the sampling lattice.
+inline constexpr Attribute<Real> kRestDensity{"_rest_density", false};
+
+}  // namespace ganache::attribute

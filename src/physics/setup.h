@@ -1,0 +1,72 @@
+#pragma once
+// SimulationSetup: everything a simulation needs besides its particles, in typed values. The scene reader fills it
+// (scene/scene.h: simulationSetup()); tests and tools may build one directly. No YAML, no render settings.
+
+#include "physics/bodies.h"
+#include "physics/effect.h"
+#include "physics/emitter.h"
+#include "physics/materials.h"
+
+#include <memory>
+#include <string_view>
+#include <vector>
+
+namespace ganache {
+
+/// Time stepping: CFL-limited dt clamped to [dtMin, dtMax], or a fixed dt.
+struct TimeStepSettings {
+    Real cfl = 0.4;      ///< dt <= cfl * particle diameter / max speed
+    Real dtMin = 1e-5;   ///< [s]
+    Real dtMax = 5e-3;   ///< [s]
+    Real fixedDt = 0;    ///< [s]; > 0 replaces the CFL rule (refinement studies)
+};
+
+/// DFSPH tolerances (Bender & Koschier 2017).
+struct PressureSettings {
+    Real densityError = 1e-4;     ///< mean relative compression allowed after the constant-density solve
+    Real divergenceError = 1e-3;  ///< mean relative density rate dt Drho/Dt / rho_0 allowed after the divergence solve
+    std::int64_t maxIterations = 100;
+    std::int64_t minIterations = 2;
+};
+
+/// A source of fluid particles: a fluid present at t = 0 or an emitter.
+struct FluidSource {
+    Material material;
+    Real temperature = 20;  ///< initial temperature [C], used with the heat effect
+};
+
+struct SimulationSetup {
+    Real particleRadius = 0;  ///< [m]
+    Vec3 domainMin = Vec3::Constant(-1), domainMax = Vec3::Constant(1);  ///< particles leaving it are removed [m]
+    TimeStepSettings timeStep;
+    PressureSettings pressure;
+    /// 0 runs the viscosity solve after the divergence-free solve (the paper's order); n >= 1 alternates it n times
+    /// with the constant-density solve before advection.
+    std::int64_t viscosityCoupling = 3;
+    /// The fluids present at t = 0, then the emitters: a particle's attribute::kFluid indexes this list.
+    std::vector<FluidSource> sources;
+    std::vector<BodySetup> bodies;      ///< every boundary body, by name
+    std::vector<EmitterSpec> emitters;  ///< their sources are the last emitters.size() entries of `sources`
+    std::vector<EffectSpec> effects;    ///< in the scene's order
+
+    const EffectSpec* findEffect(std::string_view name) const {
+        for (const auto& e : effects)
+            if (e.name == name) return &e;
+        return nullptr;
+    }
+    /// A private copy of the parameters of the effect `name`, for a study to change before the simulation is made;
+    /// std::logic_error when the set-up has no such effect with parameters of type P.
+    template <class P>
+    P& editEffect(std::string_view name) {
+        for (auto& e : effects)
+            if (e.name == name)
+                if (const auto* p = dynamic_cast<const P*>(e.params.get())) {
+                    auto copy = std::make_shared<P>(*p);
+                    e.params = copy;
+                    return *copy;
+                }
+        throw std::logic_error("the set-up has no effect '" + std::string(name) + "' of that type");
+    }
+};
+
+}  // namespace ganache
