@@ -1,6 +1,7 @@
 // The render stage: preview/<scene>.NNNN.png per frame (the surface mesh, or the particles), a contact sheet and,
 // when ffmpeg is installed, an MP4.
 
+#include "pipeline/frame_stage.h"
 #include "pipeline/stages.h"
 
 #include "core/attributes.h"
@@ -151,14 +152,11 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         return settings.view == RenderView::Mesh ||
                (settings.view == RenderView::Auto && meshesExist && std::filesystem::exists(layout.mesh(f)));
     };
-    std::vector<std::int64_t> todo;
-    std::size_t skipped = 0;
-    for (std::int64_t f = frames.first; f <= frames.second; ++f) {
-        const bool fresh = upToDate(layout.preview(f), layout.particles(f)) && upToDate(layout.preview(f), scene.file) &&
-                           (!usesMesh(f) || upToDate(layout.preview(f), layout.mesh(f)));
-        if (fresh && !force) ++skipped;
-        else todo.push_back(f);
-    }
+    FrameJobs jobs("render", "rendered", frames, force, [&](std::int64_t f) {
+        return upToDate(layout.preview(f), layout.particles(f)) && upToDate(layout.preview(f), scene.file) &&
+               (!usesMesh(f) || upToDate(layout.preview(f), layout.mesh(f)));
+    });
+    const auto& todo = jobs.todo();
 
     // The camera: the scene's, or framed once on the scene's first frame (the same for every frame).
     std::vector<CameraKey> keys = settings.camera;
@@ -180,80 +178,70 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
     const Vec3 fluidColour = settings.fluidColour.value_or(scene.sourceMaterials().front().colour);
 
     std::mutex lock;
-    std::vector<std::string> failures, warnings;
-    std::size_t done = 0, meshFrames = 0;
-    std::optional<Progress> progress;
-    if (!todo.empty()) progress.emplace("render", todo.size());
+    std::vector<std::string> warnings;
+    std::size_t meshFrames = 0;
     // One offscreen context per worker thread; llvmpipe itself spreads each frame over the cores too.
     tbb::enumerable_thread_specific<std::unique_ptr<Renderer>> renderers;
     std::filesystem::create_directories(layout.preview(frames.first).parent_path());
-    tbb::parallel_for(std::size_t(0), todo.size(), std::size_t(1), [&](std::size_t k) {
-        const std::int64_t f = todo[k];
-        try {
-            const CacheContents cache = [&] {
-                try {
-                    return readParticleCache(layout.particles(f));
-                } catch (const std::exception& e) {
-                    throw InputError(e.what());
-                }
-            }();
-            FrameView view;
-            view.camera = cameraAt(keys, f);
-            view.groundHeight = ground;
-            view.meshes = bodiesAt(scene, cache.info.time);
-            Vec3 lo = Vec3::Constant(std::numeric_limits<Real>::infinity()), hi = -lo;
-            const bool mesh = usesMesh(f);
-            if (mesh) {
-                if (!std::filesystem::exists(layout.mesh(f)))
-                    throw InputError(fmt::format("{}: no surface mesh for this frame\n  fix: run `ganache surface {} "
-                                                 "--frames {}`, or render with `view: auto`",
-                                                 layout.mesh(f).string(), scene.file.string(), f));
-                SurfaceMesh surface = readObj(layout.mesh(f));
-                DrawMesh m;
-                m.points = std::move(surface.points);
-                m.normals = std::move(surface.normals);
-                m.triangles = std::move(surface.triangles);
-                m.colour = fluidColour;
-                m.gloss = 0.6;
-                grow(lo, hi, m.points);
-                view.meshes.insert(view.meshes.begin(), std::move(m));
-            } else if (!cache.fluid.empty()) {
-                auto [values, title] = colourValues(scene, cache.fluid);
-                const auto [minIt, maxIt] = std::minmax_element(values.begin(), values.end());
-                Real a = *minIt, b = *maxIt;
-                if (settings.colourRange) std::tie(a, b) = *settings.colourRange;
-                if (!(b > a)) b = a + 1;
-                DrawPoints points;
-                points.radius = cache.info.particleRadius;
-                points.x = cache.fluid.x();
-                for (Real v : values) points.colour.push_back(colourRamp((v - a) / (b - a)));
-                view.points = std::move(points);
-                view.legend = Legend{title, a, b};
-                grow(lo, hi, cache.fluid.x());
+    jobs.run(0, todo.size(), [&](std::int64_t f) {
+        const CacheContents cache = [&] {
+            try {
+                return readParticleCache(layout.particles(f));
+            } catch (const std::exception& e) {
+                throw InputError(e.what());
             }
-            std::vector<std::string> notes;
-            if ((lo.array() <= hi.array()).all()) {
-                const Vec3 d = view.camera.target - view.camera.position;
-                if ((view.camera.position.array() > lo.array()).all() && (view.camera.position.array() < hi.array()).all())
-                    notes.push_back(fmt::format("frame {}: the camera is inside the fluid's bounds", f));
-                else if (d.normalized().dot((0.5 * (lo + hi) - view.camera.position).normalized()) <
-                         std::cos(std::min<Real>(M_PI / 2, view.camera.fovDegrees * M_PI / 180)))
-                    notes.push_back(fmt::format("frame {}: the camera looks away from the fluid", f));
-            }
-            auto& renderer = renderers.local();
-            if (!renderer) renderer = std::make_unique<Renderer>(int(settings.width), int(settings.height));
-            writePng(layout.preview(f), renderer->render(view));
-            const std::lock_guard<std::mutex> guard(lock);
-            ++done;
-            meshFrames += mesh;
-            warnings.insert(warnings.end(), notes.begin(), notes.end());
-            progress->update(done);
-        } catch (const InputError& e) {
-            const std::lock_guard<std::mutex> guard(lock);
-            failures.push_back(fmt::format("render: frame {}: {}", f, e.what()));
+        }();
+        FrameView view;
+        view.camera = cameraAt(keys, f);
+        view.groundHeight = ground;
+        view.meshes = bodiesAt(scene, cache.info.time);
+        Vec3 lo = Vec3::Constant(std::numeric_limits<Real>::infinity()), hi = -lo;
+        const bool mesh = usesMesh(f);
+        if (mesh) {
+            if (!std::filesystem::exists(layout.mesh(f)))
+                throw InputError(fmt::format("{}: no surface mesh for this frame\n  fix: run `ganache surface {} "
+                                             "--frames {}`, or render with `view: auto`",
+                                             layout.mesh(f).string(), scene.file.string(), f));
+            SurfaceMesh surface = readObj(layout.mesh(f));
+            DrawMesh m;
+            m.points = std::move(surface.points);
+            m.normals = std::move(surface.normals);
+            m.triangles = std::move(surface.triangles);
+            m.colour = fluidColour;
+            m.gloss = 0.6;
+            grow(lo, hi, m.points);
+            view.meshes.insert(view.meshes.begin(), std::move(m));
+        } else if (!cache.fluid.empty()) {
+            auto [values, title] = colourValues(scene, cache.fluid);
+            const auto [minIt, maxIt] = std::minmax_element(values.begin(), values.end());
+            Real a = *minIt, b = *maxIt;
+            if (settings.colourRange) std::tie(a, b) = *settings.colourRange;
+            if (!(b > a)) b = a + 1;
+            DrawPoints points;
+            points.radius = cache.info.particleRadius;
+            points.x = cache.fluid.x();
+            for (Real v : values) points.colour.push_back(colourRamp((v - a) / (b - a)));
+            view.points = std::move(points);
+            view.legend = Legend{title, a, b};
+            grow(lo, hi, cache.fluid.x());
         }
+        std::vector<std::string> notes;
+        if ((lo.array() <= hi.array()).all()) {
+            const Vec3 d = view.camera.target - view.camera.position;
+            if ((view.camera.position.array() > lo.array()).all() && (view.camera.position.array() < hi.array()).all())
+                notes.push_back(fmt::format("frame {}: the camera is inside the fluid's bounds", f));
+            else if (d.normalized().dot((0.5 * (lo + hi) - view.camera.position).normalized()) <
+                     std::cos(std::min<Real>(M_PI / 2, view.camera.fovDegrees * M_PI / 180)))
+                notes.push_back(fmt::format("frame {}: the camera looks away from the fluid", f));
+        }
+        auto& renderer = renderers.local();
+        if (!renderer) renderer = std::make_unique<Renderer>(int(settings.width), int(settings.height));
+        writePng(layout.preview(f), renderer->render(view));
+        const std::lock_guard<std::mutex> guard(lock);
+        meshFrames += mesh;
+        warnings.insert(warnings.end(), notes.begin(), notes.end());
     });
-    if (progress) progress->finish();
+    const std::size_t done = jobs.done();
     std::sort(warnings.begin(), warnings.end());
     for (const std::string& w : warnings) report.addWarning("render: " + w);
     for (std::int64_t f : todo) {
@@ -281,7 +269,7 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         }
     }
     // The video, from every frame of the range, when ffmpeg is there.
-    if (settings.video && failures.empty() && (done > 0 || !std::filesystem::exists(layout.video()))) {
+    if (settings.video && !jobs.failed() && (done > 0 || !std::filesystem::exists(layout.video()))) {
         if (!onPath("ffmpeg")) {
             videoNote = "; no MP4: ffmpeg is not installed (`apt-get install ffmpeg`)";
         } else {
@@ -308,14 +296,10 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
     stage.status = todo.empty() ? "skipped" : "done";
     stage.note = fmt::format("{} frames rendered at {}x{} ({} of them from surface meshes){}{}{}", done,
                              settings.width, settings.height, meshFrames,
-                             skipped ? fmt::format("; {} up to date, skipped (--force redoes them)", skipped) : "",
+                             jobs.skipped() ? fmt::format("; {} up to date, skipped (--force redoes them)", jobs.skipped())
+                                            : "",
                              sheetNote, videoNote);
-    if (!failures.empty()) {
-        std::sort(failures.begin(), failures.end());
-        std::string text = failures.front();
-        for (std::size_t k = 1; k < failures.size(); ++k) text += "\n" + failures[k];
-        throw InputError(text + fmt::format("\n  ({} other frames were rendered)", done));
-    }
+    jobs.finish();
 }
 
 }  // namespace ganache

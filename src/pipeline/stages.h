@@ -2,6 +2,7 @@
 // What the stages' source files share inside the pipeline library.
 
 #include "io/checkpoint.h"
+#include "pipeline/frame_stage.h"
 #include "pipeline/pipeline.h"
 #include "app/report.h"
 
@@ -11,13 +12,6 @@
 #include <vector>
 
 namespace ganache {
-
-/// An output is up to date when it exists and is newer than its input.
-bool upToDate(const std::filesystem::path& output, const std::filesystem::path& input);
-
-/// Throws InputError naming the first frame of the range without a particle cache, before a stage does any work.
-void requireParticleCaches(const char* stage, const Scene& scene, const OutputLayout& layout,
-                           std::pair<std::int64_t, std::int64_t> frames);
 
 /// Memory this process can still get [bytes]: the machine's MemAvailable, or less when a cgroup (v2: a farm's
 /// container or job slot) caps it; infinity when neither can be read.
@@ -34,10 +28,17 @@ void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<st
 /// version of the scene or another quality.
 std::optional<Checkpoint> findResumePoint(const Scene& scene, const OutputLayout& layout, RunReport& report);
 
+/// The sample stage (sample_stage.cpp).
+void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report);
+
 /// The simulate stage (simulate_stage.cpp), from the sample or from a checkpoint. Throws Interrupted after
 /// saving a checkpoint when SIGINT or SIGTERM arrives.
 void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
                  const std::optional<Checkpoint>& from, RunReport& report);
+
+/// The surface stage (surface_stage.cpp): frames in parallel within `memoryGiB` (0: 80 % of what is free).
+void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
+                bool force, int threads, double memoryGiB, RunReport& report);
 
 /// The render stage (render_stage.cpp).
 void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
