@@ -5,9 +5,9 @@
 // a block-Jacobi variant the saving of the rigid coarse space.
 // Run: build/benchmarks/step_bench --benchmark_counters_tabular=true
 
+#include "physics/simulation.h"
 #include "sampler/sampler.h"
 #include "scene/scene.h"
-#include "physics/simulation.h"
 
 #include <benchmark/benchmark.h>
 #include <fmt/format.h>

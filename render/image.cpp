@@ -3,8 +3,8 @@
 
 #include "render/render.h"
 
-#include "io/atomic_file.h"
 #include "core/errors.h"
+#include "io/atomic_file.h"
 
 #include <fmt/format.h>
 #include <png.h>

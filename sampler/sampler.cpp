@@ -2,11 +2,11 @@
 
 #include "physics/boundary.h"
 
+#include "app/progress.h"
 #include "core/attributes.h"
 #include "core/kernels.h"
 #include "core/neighbour_search.h"
 #include "core/parallel.h"
-#include "app/progress.h"
 
 #include "sampler/inside.h"
 

@@ -2,8 +2,8 @@
 
 #include "surfacer/surfacer.h"
 
-#include "io/atomic_file.h"
 #include "core/errors.h"
+#include "io/atomic_file.h"
 
 #include <fmt/format.h>
 

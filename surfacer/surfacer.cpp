@@ -1,11 +1,11 @@
 #include "surfacer/surfacer.h"
 
-#include "io/vdb_file.h"
 #include "core/attributes.h"
 #include "core/kernels.h"
 #include "core/neighbour_search.h"
 #include "core/parallel.h"
 #include "core/timing.h"
+#include "io/vdb_file.h"
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>

@@ -1,7 +1,7 @@
 #include "io/particle_cache.h"
 
-#include "io/checksum.h"
 #include "core/errors.h"
+#include "io/checksum.h"
 #include "io/vdb_file.h"
 
 #include <fmt/format.h>

@@ -7,10 +7,10 @@
 #include "core/attributes.h"
 #include "physics/viscosity/viscosity.h"
 
+#include "app/progress.h"
+#include "core/errors.h"
 #include "io/atomic_file.h"
 #include "io/particle_cache.h"
-#include "core/errors.h"
-#include "app/progress.h"
 #include "render/render.h"
 #include "surfacer/surfacer.h"
 

@@ -5,12 +5,12 @@
 #include "pipeline/pipeline.h"
 #include "pipeline/stages.h"
 
-#include "io/particle_cache.h"
-#include "io/checkpoint.h"
-#include "core/errors.h"
 #include "app/interrupt.h"
 #include "app/progress.h"
 #include "app/report.h"
+#include "core/errors.h"
+#include "io/checkpoint.h"
+#include "io/particle_cache.h"
 #include "physics/simulation.h"
 
 #include <fmt/format.h>

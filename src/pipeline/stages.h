@@ -1,10 +1,10 @@
 #pragma once
 // What the stages' source files share inside the pipeline library.
 
+#include "app/report.h"
 #include "io/checkpoint.h"
 #include "pipeline/frame_stage.h"
 #include "pipeline/pipeline.h"
-#include "app/report.h"
 
 #include <filesystem>
 #include <optional>

@@ -1,8 +1,8 @@
 #include "scene/scene.h"
 
+#include "geometry/shapes.h"
 #include "io/checksum.h"
 #include "physics/emitter.h"
-#include "geometry/shapes.h"
 
 #include <fmt/format.h>
 

@@ -1,7 +1,7 @@
 // Runs the real `ganache` program: exit codes, messages, outputs and report.json.
 
-#include "io/particle_cache.h"
 #include "cli_util.h"
+#include "io/particle_cache.h"
 
 #include "render/render.h"
 

@@ -3,9 +3,9 @@
 // file ever appears under an output's name. The scene (tests/scenes/resume.yaml) carries every kind of state a
 // checkpoint must hold: heat, per-particle viscosity, warm starts, an emitter, a turning paddle.
 
-#include "io/particle_cache.h"
-#include "io/checkpoint.h"
 #include "cli_util.h"
+#include "io/checkpoint.h"
+#include "io/particle_cache.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -1,8 +1,8 @@
 // Heat and melting against analytic results: conduction as the 3D heat kernel, conservation of heat,
 // radiation's exponential approach, the sources' fall-off, Reynolds' law, and which particles are surface.
 
-#include "physics/heat/heat.h"
 #include "physics/gravity.h"
+#include "physics/heat/heat.h"
 #include "physics/viscosity/viscosity.h"
 #include "world.h"
 

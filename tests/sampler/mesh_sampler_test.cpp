@@ -1,10 +1,10 @@
 // Meshes become particles: volumes against analytic and mesh volumes, meshes with holes and flipped faces,
 // placement, surfaces as boundaries, and a fluid that stays in its sampled box.
 
-#include "sampler/inside.h"
-#include "sampler/sampler.h"
 #include "geometry/shapes.h"
 #include "physics/simulation.h"
+#include "sampler/inside.h"
+#include "sampler/sampler.h"
 
 #include <gtest/gtest.h>
 

@@ -5,13 +5,13 @@
 
 #include "tools/study/study.h"
 
-#include "io/atomic_file.h"
 #include "core/errors.h"
-#include "tools/study/chart.h"
-#include "sampler/sampler.h"
+#include "io/atomic_file.h"
 #include "physics/simulation.h"
 #include "physics/viscosity/viscosity.h"
+#include "sampler/sampler.h"
 #include "scene/scene.h"
+#include "tools/study/chart.h"
 
 #include <fmt/format.h>
 #include <tbb/global_control.h>

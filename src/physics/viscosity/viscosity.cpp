@@ -1,13 +1,13 @@
 #include "physics/viscosity/viscosity.h"
 
-#include "core/parallel.h"
 #include "core/attributes.h"
 #include "core/byte_stream.h"
+#include "core/parallel.h"
 #include "physics/setup.h"
-#include "scene/section.h"
 #include "physics/viscosity/viscosity_explicit.h"
 #include "physics/viscosity/viscosity_takahashi2015.h"
 #include "physics/viscosity/viscosity_weiler2018.h"
+#include "scene/section.h"
 
 #include <fmt/format.h>
 #include <set>
