@@ -21,12 +21,27 @@ struct TimeStepSettings {
     Real fixedDt = 0;    ///< [s]; > 0 replaces the CFL rule (refinement studies)
 };
 
-/// DFSPH tolerances (Bender & Koschier 2017).
+/// DFSPH tolerances (Bender & Koschier 2017) and the solver that reaches them.
 struct PressureSettings {
+    /// mprgp: projected conjugate gradients (Dostal & Schoeberl 2005), ganache's; jacobi: DFSPH's relaxed Jacobi.
+    /// Both stop at the same residual; Jacobi needs 5-7 times the iterations on a resting column.
+    enum class Solver { Mprgp, Jacobi };
+    Solver solver = Solver::Mprgp;
     Real densityError = 1e-4;     ///< mean relative compression allowed after the constant-density solve
     Real divergenceError = 1e-3;  ///< mean relative density rate dt Drho/Dt / rho_0 allowed after the divergence solve
     std::int64_t maxIterations = 100;
     std::int64_t minIterations = 2;
+};
+
+/// Where the viscosity solve sits in a step (see simulation.h).
+struct ViscosityOrder {
+    enum class Kind {
+        Predicted,  ///< ganache's: after the forces and the pressure warm start, before the constant-density solve
+        Paper,      ///< Algorithm 1 of Weiler et al. 2018: after the divergence-free solve
+        Coupled     ///< alternating `passes` times with the constant-density solve before advection
+    };
+    Kind kind = Kind::Predicted;
+    std::int64_t passes = 3;  ///< for Coupled
 };
 
 /// A source of fluid particles: a fluid present at t = 0 or an emitter.
@@ -40,9 +55,7 @@ struct SimulationSetup {
     Vec3 domainMin = Vec3::Constant(-1), domainMax = Vec3::Constant(1);  ///< particles leaving it are removed [m]
     TimeStepSettings timeStep;
     PressureSettings pressure;
-    /// 0 runs the viscosity solve after the divergence-free solve (the paper's order); n >= 1 alternates it n times
-    /// with the constant-density solve before advection.
-    std::int64_t viscosityCoupling = 3;
+    ViscosityOrder viscosityOrder;
     /// The fluids present at t = 0, then the emitters: a particle's attribute::kFluid indexes this list.
     std::vector<FluidSource> sources;
     std::vector<BodySetup> bodies;      ///< every boundary body, by name

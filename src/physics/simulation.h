@@ -1,12 +1,11 @@
 #pragma once
-// One simulation step, filled with the effects a scene asks for. With viscosity_coupling = 0 it is Algorithm 1 of
-// Weiler et al. 2018:
-//   Start effects (heat) -> Forces effects (gravity) -> CFL time step -> constant-density solve [BK17] -> contact
-//   -> advection -> Emit effects (emitters) -> neighbour search, densities, DFSPH factors -> divergence-free solve
-//   [BK17] -> Viscosity effects [WKBB18]
-// With n > 0 (default 3) the constant-density solve and the viscosity solve alternate n times before advection,
-// and the divergence-free solve ends the step. Simulation owns this order and nothing else: the effects live in
-// their own files, the bodies' motion and loads in bodies.h, the contact rule in contact.h.
+// One simulation step, filled with the effects a scene asks for. In ganache's order (ViscosityOrder::Predicted):
+//   CFL time step -> Start effects (heat) -> divergence-free solve [BK17] -> Forces effects (gravity) -> the last
+//   step's constant-density pressure as a warm start -> Viscosity effects [WKBB18] -> constant-density solve [BK17]
+//   -> contact -> advection -> Emit effects (emitters) -> neighbour search, densities, DFSPH factors
+// which is Algorithm 1 of Weiler et al. 2018 (ViscosityOrder::Paper) with the viscosity solve moved in front of the
+// constant-density solve's iterations. Simulation owns this order and nothing else: the effects live in their own
+// files, the bodies' motion and loads in bodies.h, the contact rule in contact.h.
 
 #include "core/kernels.h"
 #include "core/neighbour_search.h"
@@ -145,6 +144,7 @@ private:
     void computeDensities();
     Real chooseDt(Real maxDt) const;
     void removeEscaped();
+    void divergenceFree(StepContext& ctx);
     void moveBoundaries(Real t);
     void checkFinite(const char* stage);
 
@@ -154,7 +154,7 @@ private:
     Vec3 m_domainMin, m_domainMax;
     TimeStepSettings m_timeStep;
     PressureSettings m_pressureSettings;
-    std::int64_t m_coupling;  // 0: viscosity after the divergence-free solve; n: n passes before advection
+    ViscosityOrder m_order;
 
     ParticleSet m_fluid;
     BoundaryParticles m_boundary;

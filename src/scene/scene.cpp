@@ -291,7 +291,7 @@ SimulationSetup simulationSetup(const Scene& scene) {
     s.domainMax = scene.domainMax;
     s.timeStep = scene.timeStep;
     s.pressure = scene.pressure;
-    s.viscosityCoupling = scene.viscosityCoupling;
+    s.viscosityOrder = scene.viscosityOrder;
     for (const auto& f : scene.fluids) s.sources.push_back({f.material, f.temperature});
     for (const auto& e : scene.emitters) s.sources.push_back({e.material, e.temperature});
     for (const auto& b : scene.boundaries) s.bodies.push_back({b.name, b.motion});
@@ -529,10 +529,22 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
                                    Bounds{0, 10, true, false}) / 100;
         p.divergenceError = ps.number("divergence_error", 100 * p.divergenceError, "% of rest density per step",
                                       Bounds{0, 10, true, false}) / 100;
+        p.solver = ps.choice("solver", "mprgp", {"mprgp", "jacobi"}) == "jacobi" ? PressureSettings::Solver::Jacobi
+                                                                               : PressureSettings::Solver::Mprgp;
         p.maxIterations = ps.integer("max_iterations", p.maxIterations, 1, 100000);
         p.minIterations = ps.integer("min_iterations", p.minIterations, 0, p.maxIterations);
         ps.rejectUnused();
-        scene.viscosityCoupling = sim.integer("viscosity_coupling", scene.viscosityCoupling, 0, 10);
+        // A name, or (as before there were names) a number: 0 is the paper's order, n >= 1 n coupled passes.
+        ViscosityOrder& order = scene.viscosityOrder;
+        if (sim.isNumber("viscosity_coupling")) {
+            const std::int64_t passes = sim.integer("viscosity_coupling", std::nullopt, 0, 10);
+            order.kind = passes == 0 ? ViscosityOrder::Kind::Paper : ViscosityOrder::Kind::Coupled;
+            order.passes = std::max<std::int64_t>(passes, 1);
+        } else {
+            order.kind = sim.choice("viscosity_coupling", "predicted", {"predicted", "paper"}) == "paper"
+                             ? ViscosityOrder::Kind::Paper
+                             : ViscosityOrder::Kind::Predicted;
+        }
         scene.checkpointEvery = sim.integer("checkpoint_every", scene.checkpointEvery, 0, 9999);
         scene.checkpointsKept = sim.integer("checkpoints_kept", scene.checkpointsKept, 1, 100);
         sim.rejectUnused();

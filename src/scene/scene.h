@@ -174,9 +174,8 @@ struct Scene {
 
     TimeStepSettings timeStep;
     PressureSettings pressure;
-    /// simulation.viscosity_coupling: 0 runs the viscosity solve after the divergence-free solve (the paper's
-    /// order); n >= 1 alternates it n times with the constant-density solve before advection.
-    std::int64_t viscosityCoupling = 3;
+    /// simulation.viscosity_coupling: where the viscosity solve sits in a step (predicted, paper, or n coupled passes).
+    ViscosityOrder viscosityOrder;
     /// simulation.checkpoint_every: a checkpoint after every this many frames (and after the last); 0: none.
     std::int64_t checkpointEvery = 10;
     /// simulation.checkpoints_kept: the newest this many are kept, so a damaged one has one to fall back on.

@@ -145,6 +145,14 @@ const std::string& Section::path() const { return m->path; }
 
 void Section::claim(const std::string& key) { m->read.insert(key); }
 
+bool Section::isNumber(const std::string& key) const {
+    const YAML::Node n = m->node[key];
+    if (!n.IsDefined() || !n.IsScalar() || n.Scalar().empty()) return false;
+    char* end = nullptr;
+    std::strtod(n.Scalar().c_str(), &end);
+    return end && *end == '\0';
+}
+
 std::string Section::keyPath(const std::string& key) const { return m->path.empty() ? key : m->path + "." + key; }
 
 void Section::fail(const std::string& key, const std::string& what, const std::string& fix) const {

@@ -48,6 +48,7 @@ public:
     Location where(const std::string& key) const;        ///< the key's value, or the map when absent
     bool has(const std::string& key) const;
     bool isList(const std::string& key) const;  ///< the key's value is a YAML sequence
+    bool isNumber(const std::string& key) const;  ///< the key's value reads as a number
 
     Real number(const std::string& key, std::optional<Real> fallback, const std::string& unit, Bounds bounds = {});
     Real positive(const std::string& key, std::optional<Real> fallback, const std::string& unit) {

@@ -16,9 +16,12 @@ public:
     /// DFSPH factors 1 / (|sum m grad W + kWall sum Psi grad W|^2 + sum |m grad W|^2) at the current
     /// positions [BK17 Eq. 11].
     void computeFactors(const StepContext& ctx, const ParticleSet& particles);
-    /// Constant-density solve on the predicted velocities, before advection. The first pass of a step applies
-    /// the previous step's pressure as a warm start; later passes (coupled with viscosity) only add to it.
-    void solveDensity(StepContext& ctx, ParticleSet& particles, bool firstPass);
+    /// Applies the previous step's constant-density pressure to the velocities: the warm start of this step's
+    /// constant-density solve.
+    void applyWarmStart(StepContext& ctx, ParticleSet& particles);
+    /// Constant-density solve on the predicted velocities, before advection, from the pressures applied so far
+    /// (the warm start, and earlier passes of the step).
+    void solveDensity(StepContext& ctx, ParticleSet& particles);
     /// Divergence-free solve on the velocities after advection.
     void solveDivergence(StepContext& ctx, ParticleSet& particles);
 
@@ -29,8 +32,13 @@ private:
     // iterations.
     template <class Target>
     std::size_t solve(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
-                      bool warmStart, Target target);
+                      Target target);
 
+    template <class Target>
+    std::size_t solveMprgp(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
+                           Target target);
+    // v -= dt grad(s) / rho: the velocity change of pressures s (kappa / rho) [BK17].
+    void applyPressure(const StepContext& ctx, ParticleSet& particles, const std::vector<Real>& s) const;
     // Adds the impulse the pressures `s` gave through the boundary to each body's load.
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const;
 
