@@ -27,12 +27,14 @@ public:
 
     /// Gradient of W with respect to the first particle's position, for r = x_i - x_j.
     /// Zero at r = 0 (the kernel is flat there) and outside the support; grad W(-r) = -grad W(r).
-    Vec3 gradW(const Vec3& r) const {
-        const Real rl = r.norm();
+    Vec3 gradW(const Vec3& r) const { return gradFactor(r.norm()) * r; }
+    /// The factor g <= 0 with grad W(r) = g r, for |r| = rl [1/m^5]: what solvers keep per neighbour pair, so that
+    /// no sweep evaluates the kernel again.
+    Real gradFactor(Real rl) const {
         const Real q = rl / m_h;
-        if (q >= 1 || rl < Real(1e-12) * m_h) return Vec3::Zero();
+        if (q >= 1 || rl < Real(1e-12) * m_h) return 0;
         const Real dWdq = q <= Real(0.5) ? m_l * q * (3 * q - 2) : -m_l * (1 - q) * (1 - q);
-        return (dWdq / (rl * m_h)) * r;
+        return dWdq / (rl * m_h);
     }
 
     Real W0() const { return m_k; }  ///< W at r = 0

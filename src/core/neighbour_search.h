@@ -26,6 +26,9 @@ struct NeighbourList {
     std::vector<std::uint32_t> indices;
 
     std::size_t particles() const { return offsets.size() - 1; }
+    /// Pair p of particle i runs over offsets[i] .. offsets[i+1]; per-pair data is kept in that order.
+    std::size_t first(std::size_t i) const { return std::size_t(offsets[i]); }
+    std::size_t last(std::size_t i) const { return std::size_t(offsets[i + 1]); }
     std::size_t pairs() const { return indices.size(); }
     Range of(std::size_t i) const { return {indices.data() + offsets[i], indices.data() + offsets[i + 1]}; }
 };

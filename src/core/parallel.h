@@ -20,6 +20,13 @@ void forEachParticle(std::size_t n, F&& f, std::size_t grain = 512) {
     });
 }
 
+/// Calls f(begin, end) on blocks of [0, n) in parallel; f must write only the slots of its block.
+template <class F>
+void forEachBlock(std::size_t n, F&& f, std::size_t grain = 512) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, grain),
+                      [&](const auto& r) { f(r.begin(), r.end()); });
+}
+
 /// sum_i term(i), deterministic for any thread count; T is any type with + and a zero (Real, Eigen vectors).
 template <class T = Real, class Term>
 T deterministicSum(std::size_t n, Term&& term, T zero = T(0)) {

@@ -21,9 +21,11 @@ void Contact::apply(StepContext& ctx, ParticleSet& particles) {
     forEachParticle(x.size(), [&](std::size_t i) {
         Vec3 towardWall = Vec3::Zero();
         Real closest2 = std::numeric_limits<Real>::infinity();
-        for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+        const auto& list = ctx.boundaryNeighbours;
+        for (std::size_t p = list.first(i); p < list.last(i); ++p) {
+            const std::uint32_t k = list.indices[p];
             const Vec3 xik = x[i] - b.x[k];
-            towardWall += b.volume[k] * ctx.kernel.gradW(xik);  // grad W points from the particle to k
+            towardWall += (b.volume[k] * ctx.gradients.boundary[p]) * xik;  // grad W points from the particle to k
             if (xik.squaredNorm() < closest2) closest2 = xik.squaredNorm(), nearest[i] = k;
         }
         if (towardWall.squaredNorm() == 0) return;

@@ -30,6 +30,7 @@ struct PressureSettings {
     Real densityError = 1e-4;     ///< mean relative compression allowed after the constant-density solve
     Real divergenceError = 1e-3;  ///< mean relative density rate dt Drho/Dt / rho_0 allowed after the divergence solve
     std::int64_t maxIterations = 100;
+    /// MPRGP measures the exact residual before each iteration, so it may stop at 0; DFSPH's Jacobi asks for 2.
     std::int64_t minIterations = 2;
 };
 

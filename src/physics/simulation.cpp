@@ -112,8 +112,8 @@ void Simulation::restore(const SimulationState& s) {
 }
 
 StepContext Simulation::context(Real dt) {
-    return StepContext{dt, m_time, m_step, m_kernel, m_fluidNeighbours, m_boundaryNeighbours,
-                       m_density, *m_restDensity, m_boundary, m_stats, m_loads};
+    return StepContext{dt,         m_time,          m_step,     m_kernel,  m_fluidNeighbours, m_boundaryNeighbours,
+                       m_gradients, m_density,      *m_restDensity, m_boundary, m_stats,        m_loads};
 }
 
 std::vector<std::string> Simulation::effectNames() const {
@@ -172,15 +172,28 @@ void Simulation::updateNeighbours(bool mayReorder) {
 void Simulation::computeDensities() {
     const std::size_t n = m_fluid.size();
     m_density.resize(n);
+    m_gradients.fluid.resize(m_fluidNeighbours.pairs());
+    m_gradients.boundary.resize(m_boundaryNeighbours.pairs());
     const auto& x = m_fluid.x();
     const auto& m = m_fluid.mass();
     const auto& rho0 = *m_restDensity;
+    const auto& f = m_fluidNeighbours;
+    const auto& b = m_boundaryNeighbours;
     forEachParticle(n, [&](std::size_t i) {
         // rho_i = sum_j m_j W_ij + sum_k Psi_k W_ik, with Psi_k = rho_0 V_k [AIA+12]
         Real rho = m[i] * m_kernel.W0();
-        for (std::uint32_t j : m_fluidNeighbours.of(i)) rho += m[j] * m_kernel.W(x[i] - x[j]);
-        for (std::uint32_t k : m_boundaryNeighbours.of(i))
-            rho += rho0[i] * m_boundary.volume[k] * m_kernel.W(x[i] - m_boundary.x[k]);
+        for (std::size_t p = f.first(i); p < f.last(i); ++p) {
+            const std::uint32_t j = f.indices[p];
+            const Real r = (x[i] - x[j]).norm();
+            rho += m[j] * m_kernel.W(r);
+            m_gradients.fluid[p] = m_kernel.gradFactor(r);
+        }
+        for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+            const std::uint32_t k = b.indices[p];
+            const Real r = (x[i] - m_boundary.x[k]).norm();
+            rho += rho0[i] * m_boundary.volume[k] * m_kernel.W(r);
+            m_gradients.boundary[p] = m_kernel.gradFactor(r);
+        }
         m_density[i] = rho;
     });
 }

@@ -48,6 +48,15 @@ struct SolverStats {
     void warn(std::string text);
 };
 
+/// The kernel gradient of every neighbour pair at the current positions, as the factor g with grad W(x_ij) = g x_ij,
+/// in the order of the neighbour lists (pair p of particle i is NeighbourList::first(i) + ...). Computed once after
+/// each neighbour search, with the densities, and used by every sweep of the next step: no solver evaluates the
+/// kernel again.
+struct PairGradients {
+    std::vector<Real> fluid;     ///< fluid-fluid pairs
+    std::vector<Real> boundary;  ///< fluid-boundary pairs
+};
+
 /// What an effect may read in one step; nothing is global.
 struct StepContext {
     Real dt = 0;
@@ -56,6 +65,7 @@ struct StepContext {
     const CubicSpline& kernel;
     const NeighbourList& fluidNeighbours;     ///< fluid-fluid, at the current positions
     const NeighbourList& boundaryNeighbours;  ///< fluid-boundary
+    const PairGradients& gradients;           ///< of both lists' pairs
     const std::vector<Real>& density;         ///< [kg/m^3], at the current positions
     const std::vector<Real>& restDensity;     ///< rho_0 of each particle [kg/m^3]
     const BoundaryParticles& boundary;
@@ -114,6 +124,7 @@ public:
     const CubicSpline& kernel() const { return m_kernel; }
     const NeighbourList& fluidNeighbours() const { return m_fluidNeighbours; }
     const NeighbourList& boundaryNeighbours() const { return m_boundaryNeighbours; }
+    const PairGradients& gradients() const { return m_gradients; }
     /// Names of the effects that run, in the order they were made (the scene's, then emitters).
     std::vector<std::string> effectNames() const;
     /// Every effect's time and counters.
@@ -160,6 +171,7 @@ private:
     BoundaryParticles m_boundary;
     UniformGrid m_fluidGrid, m_boundaryGrid;
     NeighbourList m_fluidNeighbours, m_boundaryNeighbours;
+    PairGradients m_gradients;
     std::vector<Real> m_density;
     std::vector<Real>* m_restDensity;  // a particle attribute, so it moves with reordering and removal
     Contact m_contact;

@@ -36,14 +36,15 @@ public:
     /// The walls of a box; with openTop, no face at max y.
     World& box(const std::string& name, const Vec3& min, const Vec3& max, bool openTop = false,
                const BodyMotion& motion = {}) {
-        m_walls.push_back({name, boxWallPoints(min, max, openTop, setup.particleRadius)});
+        m_walls.push_back({name, boxWallPoints(min, max, openTop, setup.particleRadius), {}});
         setup.bodies.push_back({name, motion});
         return *this;
     }
     /// A plane through `point`, sampled across the domain.
     World& plane(const std::string& name, const Vec3& point = Vec3::Zero(), const Vec3& normal = Vec3::UnitY()) {
         m_walls.push_back({name, planePoints(point, normal.normalized(), setup.domainMin, setup.domainMax,
-                                             setup.particleRadius, supportRadiusFor(setup.particleRadius))});
+                                             setup.particleRadius, supportRadiusFor(setup.particleRadius)),
+                           {}});
         setup.bodies.push_back({name, {}});
         return *this;
     }

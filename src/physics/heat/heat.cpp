@@ -18,10 +18,11 @@ namespace {
 
 constexpr std::size_t kMinSurfaceNeighbours = 8;  // fewer: a drop or a thread, all surface
 
-// F_ij = (x_ij . grad W_ij) / (|x_ij|^2 + 0.01 h^2) <= 0 [1/m^5]: the kernel part of the Laplacian of Eq. 16.
-Real laplacianWeight(const Vec3& xij, const CubicSpline& w) {
-    const Real h = w.supportRadius();
-    return xij.dot(w.gradW(xij)) / (xij.squaredNorm() + 0.01 * h * h);
+// F_ij = (x_ij . grad W_ij) / (|x_ij|^2 + 0.01 h^2) <= 0 [1/m^5]: the kernel part of the Laplacian of Eq. 16, with
+// grad W_ij = g x_ij.
+Real laplacianWeight(const Vec3& xij, Real g, Real h2) {
+    const Real r2 = xij.squaredNorm();
+    return g * r2 / (r2 + 0.01 * h2);
 }
 
 HeatSource readSource(Section s, std::size_t index) {
@@ -161,23 +162,28 @@ public:
         // bodies at a set temperature T_b join the sum with their boundary volumes V_k.
         m_rate.resize(n);
         m_diagonal.resize(n);
+        const Real h2 = ctx.kernel.supportRadius() * ctx.kernel.supportRadius();
         auto rates = [&] {
             forEachParticle(n, [&](std::size_t i) {
                 const std::size_t si = source(i);
                 const Real vi = m[i] / rho[i];
                 Real sum = 0, diagonal = 0;
-                for (std::uint32_t j : ctx.fluidNeighbours.of(i)) {
+                const auto& f = ctx.fluidNeighbours;
+                for (std::size_t p = f.first(i); p < f.last(i); ++p) {
+                    const std::uint32_t j = f.indices[p];
                     const Real kij = 0.5 * (m_conductivity[si] + m_conductivity[source(j)]);
-                    const Real c = 2 * kij * vi * (m[j] / rho[j]) * laplacianWeight(x[i] - x[j], ctx.kernel);
+                    const Real c = 2 * kij * vi * (m[j] / rho[j]) * laplacianWeight(x[i] - x[j], ctx.gradients.fluid[p], h2);
                     sum += c * (T[i] - T[j]);
                     diagonal -= c;
                 }
-                for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+                const auto& b = ctx.boundaryNeighbours;
+                for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+                    const std::uint32_t k = b.indices[p];
                     const std::uint32_t body = ctx.boundary.body[k];
                     if (std::isnan(m_bodyTemperature[body])) continue;
                     const Real kib = m_bodyConductivity[body] >= 0 ? m_bodyConductivity[body] : m_conductivity[si];
                     const Real c = 2 * kib * vi * ctx.boundary.volume[k] *
-                                   laplacianWeight(x[i] - ctx.boundary.x[k], ctx.kernel);
+                                   laplacianWeight(x[i] - ctx.boundary.x[k], ctx.gradients.boundary[p], h2);
                     sum += c * (T[i] - m_bodyTemperature[body]);
                     diagonal -= c;
                 }

@@ -1,6 +1,7 @@
 #include "physics/pressure/pressure_dfsph.h"
 
 #include "core/parallel.h"
+#include "physics/pair_sweeps.h"
 
 #include <fmt/format.h>
 
@@ -12,15 +13,14 @@ namespace {
 
 // Weight of a boundary particle in the pressure coupling (density rate and push alike; the density itself counts
 // it once). Counted once, as in [AIA+12], walls leaked 8 of 1000 particles of an inviscid block splashing in a
-// closed tank and a resting viscous column needed 125 iterations a step. Doubling only the push (the symmetric
-// pair form with the mirrored pressure) stopped the leak, but the push was then no longer the adjoint of the
-// rate and an inviscid column gained energy. Doubling both keeps the solve a projection: no leak, no energy
-// gain, 10 iterations a step for the column.
+// closed tank. Doubling only the push (the symmetric pair form with the mirrored pressure) stopped the leak, but the
+// push was then no longer the adjoint of the rate and an inviscid column gained energy. Doubling both keeps the
+// solve a projection: no leak, no energy gain.
 constexpr Real kWall = 2;
 
 // Jacobi relaxation. The DFSPH diagonal leaves out how neighbours' pressures feed back, so the unrelaxed
 // iteration can overshoot in an alternating pattern and diverge (seen on a column resting on a wall); half
-// steps, as in IISPH (Ihmsen et al. 2014), converge.
+// steps, as in IISPH (Ihmsen et al. 2014), converge. MPRGP's gradient-projection steps use the same length.
 constexpr Real kRelaxation = 0.5;
 
 // The constant-density pressure kappa / rho of the last step: the next step's warm start.
@@ -29,25 +29,52 @@ constexpr Attribute<Real> kPressure{"_pressure", false};
 }  // namespace
 
 PressureDFSPH::PressureDFSPH(const PressureSettings& settings, ParticleSet& particles)
-    : m_settings(settings),
-      m_pressure(&particles.add(kPressure)) {}
+    : m_settings(settings), m_pressure(&particles.add(kPressure)) {}
+
+void PressureDFSPH::rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u,
+                          bool withBodies, std::vector<Real>& out) const {
+    out.resize(particles.size());
+    forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
+        sweeps::densityRate(begin, end, {&ctx.fluidNeighbours, m_weights.data()},
+                            {&ctx.boundaryNeighbours, m_boundaryWeights.data()}, particles.x().data(),
+                            ctx.boundary.x.data(), u.data(), withBodies ? ctx.boundary.v.data() : nullptr, out.data());
+    });
+}
+
+void PressureDFSPH::velocityChanges(const StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s,
+                                    std::vector<Vec3>& out) const {
+    out.resize(particles.size());
+    forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
+        sweeps::pressureChange(begin, end, {&ctx.fluidNeighbours, m_weights.data()},
+                               {&ctx.boundaryNeighbours, m_boundaryWeights.data()}, particles.x().data(),
+                               ctx.boundary.x.data(), s.data(), ctx.dt, out.data());
+    });
+}
 
 void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& particles) {
     const std::size_t n = particles.size();
     m_factor.resize(n);
     const auto& x = particles.x();
     const auto& m = particles.mass();
+    const auto& f = ctx.fluidNeighbours;
+    const auto& b = ctx.boundaryNeighbours;
     const Real h4 = std::pow(ctx.kernel.supportRadius(), 4);
+    m_weights.resize(f.pairs());
+    m_boundaryWeights.resize(b.pairs());
     forEachParticle(n, [&](std::size_t i) {
         Vec3 sum = Vec3::Zero();
         Real squares = 0;
-        for (std::uint32_t j : ctx.fluidNeighbours.of(i)) {
-            const Vec3 g = m[j] * ctx.kernel.gradW(x[i] - x[j]);
+        for (std::size_t p = f.first(i); p < f.last(i); ++p) {
+            m_weights[p] = m[f.indices[p]] * ctx.gradients.fluid[p];
+            const Vec3 g = m_weights[p] * (x[i] - x[f.indices[p]]);
             sum += g;
             squares += g.squaredNorm();
         }
-        for (std::uint32_t k : ctx.boundaryNeighbours.of(i))
-            sum += kWall * ctx.restDensity[i] * ctx.boundary.volume[k] * ctx.kernel.gradW(x[i] - ctx.boundary.x[k]);
+        for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+            m_boundaryWeights[p] =
+                kWall * ctx.restDensity[i] * ctx.boundary.volume[b.indices[p]] * ctx.gradients.boundary[p];
+            sum += m_boundaryWeights[p] * (x[i] - ctx.boundary.x[b.indices[p]]);
+        }
         const Real denominator = sum.squaredNorm() + squares;
         // Particles with (almost) no neighbours get no pressure: a lone particle cannot be compressed.
         const Real scale = m[i] / h4;
@@ -55,214 +82,178 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     });
 }
 
-template <class Target>
-std::size_t PressureDFSPH::solve(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
-                                 Target target) {
-    if (m_settings.solver == PressureSettings::Solver::Mprgp) return solveMprgp(which, ctx, particles, pressure, target);
-    const bool density = which == Solve::Density;
-    const Real tolerance = density ? m_settings.densityError : m_settings.divergenceError;
-    const std::size_t n = particles.size();
-    if (n == 0) return 0;
-    const Real dt = ctx.dt;
-    const auto& x = particles.x();
-    const auto& m = particles.mass();
+void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles) {
     auto& v = particles.v();
-    m_rate.resize(n);
-    m_step.resize(n);
-    std::vector<Real> error(n);
+    velocityChanges(ctx, particles, *m_pressure, m_velocityChange);
+    forEachParticle(particles.size(), [&](std::size_t i) { v[i] += m_velocityChange[i]; }, 4096);
+    addBoundaryLoads(ctx, particles, *m_pressure);
+}
 
-    m_start = pressure;
+void PressureDFSPH::warnCapHit(StepContext& ctx, Solve which, std::size_t iterations, Real error) const {
+    const bool density = which == Solve::Density;
+    ++(density ? ctx.stats.pressureCapHits : ctx.stats.divergenceCapHits);
+    ctx.stats.warn(fmt::format("step {}: {} solve stopped at {} iterations (mean error {:.3g} > {:.3g}); lower "
+                               "simulation.time_step.max or raise simulation.pressure.max_iterations",
+                               ctx.step, density ? "constant-density" : "divergence-free", iterations, error,
+                               density ? m_settings.densityError : m_settings.divergenceError));
+}
+
+template <class Target>
+std::size_t PressureDFSPH::solveJacobi(Solve which, StepContext& ctx, ParticleSet& particles,
+                                       std::vector<Real>& pressure, Target target) {
+    const Real tolerance = which == Solve::Density ? m_settings.densityError : m_settings.divergenceError;
+    const std::size_t n = particles.size();
+    const Real dt = ctx.dt;
+    auto& v = particles.v();
+    m_error.resize(n);
+    m_change.resize(n);
+    m_residual.resize(n);
     std::size_t iteration = 0;
     for (;; ++iteration) {
+        rates(ctx, particles, v, true, m_rate);
         forEachParticle(n, [&](std::size_t i) {
-            Real rate = 0;  // Drho/Dt
-            for (std::uint32_t j : ctx.fluidNeighbours.of(i)) rate += m[j] * (v[i] - v[j]).dot(ctx.kernel.gradW(x[i] - x[j]));
-            for (std::uint32_t k : ctx.boundaryNeighbours.of(i))
-                rate += kWall * ctx.restDensity[i] * ctx.boundary.volume[k] *
-                        (v[i] - ctx.boundary.v[k]).dot(ctx.kernel.gradW(x[i] - ctx.boundary.x[k]));
-            m_rate[i] = target(i, rate);  // signed density error to remove [kg/m^3]
+            m_error[i] = target(i, m_rate[i]);  // signed density error to remove [kg/m^3]
             // Complementarity residual: a particle under pressure must sit at rest density (an expanding one
-            // is pushed too hard, e.g. by a warm start from another neighbourhood); one without pressure may
-            // only be too light.
-            error[i] = (pressure[i] > 0 ? std::abs(m_rate[i]) : std::max<Real>(m_rate[i], 0)) / ctx.restDensity[i];
+            // is pushed too hard); one without pressure may only be too light.
+            m_residual[i] = (pressure[i] > 0 ? std::abs(m_error[i]) : std::max<Real>(m_error[i], 0)) /
+                            ctx.restDensity[i];
         });
-        const Real meanError = deterministicSum(n, [&](std::size_t i) { return error[i]; }) / Real(n);
-        const bool converged = meanError <= tolerance;
+        const Real error = deterministicSum(n, [&](std::size_t i) { return m_residual[i]; }) / Real(n);
+        const bool converged = error <= tolerance;
         if ((converged && iteration >= std::size_t(m_settings.minIterations)) ||
             iteration >= std::size_t(m_settings.maxIterations)) {
-            if (!converged) {
-                ++(density ? ctx.stats.pressureCapHits : ctx.stats.divergenceCapHits);
-                ctx.stats.warn(fmt::format("step {}: {} solve stopped at {} iterations (mean error {:.3g} > {:.3g}); "
-                                           "lower simulation.time_step.max or raise simulation.pressure.max_iterations",
-                                           ctx.step, density ? "constant-density" : "divergence-free",
-                                           iteration, meanError, tolerance));
-            }
-            break;
+            if (!converged) warnCapHit(ctx, which, iteration, error);
+            return iteration;
         }
         // Projected Jacobi step: the pressure of a particle never goes below zero.
         forEachParticle(n, [&](std::size_t i) {
-            const Real next = std::max<Real>(pressure[i] + kRelaxation * m_rate[i] * m_factor[i] / (dt * dt), 0);
-            m_step[i] = next - pressure[i];
+            const Real next = std::max<Real>(pressure[i] + kRelaxation * m_error[i] * m_factor[i] / (dt * dt), 0);
+            m_change[i] = next - pressure[i];
             pressure[i] = next;
         });
-        applyPressure(ctx, particles, m_step);
+        velocityChanges(ctx, particles, m_change, m_velocityChange);
+        forEachParticle(n, [&](std::size_t i) { v[i] += m_velocityChange[i]; }, 4096);
     }
-    // What this solve added to the pressures applied before it.
-    for (std::size_t i = 0; i < n; ++i) m_start[i] = pressure[i] - m_start[i];
-    addBoundaryLoads(ctx, particles, m_start);
-    return iteration;
 }
 
 template <class Target>
 std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet& particles,
                                       std::vector<Real>& pressure, Target target) {
     // The solve as a bound-constrained quadratic program: with e(s) = b - dt^2 A s the density error to remove
-    // (A = J J^T, J the density rate of a velocity field, J^T the velocity change of pressures), find s >= 0 with
-    // e <= 0 and s_i e_i = 0. Its gradient is G = -e. MPRGP (Dostal & Schoeberl 2005): conjugate gradient steps on the
-    // particles under pressure, gradient projection when a step would make a pressure negative, and proportioning
-    // steps that release particles whose neighbours compress them. Diagonally preconditioned by the DFSPH factor
-    // (1 / A_ii). Each iteration costs one product with A, as a Jacobi sweep does.
-    const bool density = which == Solve::Density;
-    const Real tolerance = density ? m_settings.densityError : m_settings.divergenceError;
+    // (A = J J^T, J the density rate of a velocity field, -dt J^T the velocity change of pressures), find s >= 0
+    // with e <= 0 and s_i e_i = 0; its gradient is G = -e. MPRGP (Dostal & Schoeberl 2005, "Minimizing quadratic
+    // functions subject to bound constraints with the rate of convergence and finite termination"): conjugate
+    // gradient steps on the particles under pressure, a projected gradient step when a step would make a pressure
+    // negative, and proportioning steps that give pressure to particles their neighbours compress. Diagonally
+    // preconditioned by the DFSPH factor (1 / A_ii). Every product with A costs what one Jacobi sweep does.
+    const Real tolerance = which == Solve::Density ? m_settings.densityError : m_settings.divergenceError;
     const std::size_t n = particles.size();
-    if (n == 0) return 0;
-    const Real dt = ctx.dt;
-    const auto& x = particles.x();
-    const auto& m = particles.mass();
-    auto& v = particles.v();
+    const Real dt2 = ctx.dt * ctx.dt;
     const auto& rho0 = ctx.restDensity;
-    m_start = pressure;
-    std::vector<Real> e(n), dir(n), q(n), z(n);
-    std::vector<Vec3> dv(n);
-    // The density rate of a velocity field: with the bodies' velocities (withBodies) for the error, without for A.
-    auto rate = [&](const std::vector<Vec3>& u, std::size_t i, bool withBodies) {
-        Real r = 0;
-        for (std::uint32_t j : ctx.fluidNeighbours.of(i)) r += m[j] * (u[i] - u[j]).dot(ctx.kernel.gradW(x[i] - x[j]));
-        for (std::uint32_t k : ctx.boundaryNeighbours.of(i))
-            r += kWall * rho0[i] * ctx.boundary.volume[k] *
-                 (withBodies ? Vec3(u[i] - ctx.boundary.v[k]) : u[i]).dot(ctx.kernel.gradW(x[i] - ctx.boundary.x[k]));
-        return r;
-    };
-    auto errors = [&] { forEachParticle(n, [&](std::size_t i) { e[i] = target(i, rate(v, i, true)); }); };
-    // q = dt^2 A d, and dv = -dt J^T d, the velocity change of the pressures d.
-    auto product = [&](const std::vector<Real>& d) {
-        forEachParticle(n, [&](std::size_t i) {
-            Vec3 a = Vec3::Zero();
-            for (std::uint32_t j : ctx.fluidNeighbours.of(i)) a += m[j] * (d[i] + d[j]) * ctx.kernel.gradW(x[i] - x[j]);
-            for (std::uint32_t k : ctx.boundaryNeighbours.of(i))
-                a += kWall * rho0[i] * ctx.boundary.volume[k] * d[i] * ctx.kernel.gradW(x[i] - ctx.boundary.x[k]);
-            dv[i] = -dt * a;
-        });
-        forEachParticle(n, [&](std::size_t i) { q[i] = -dt * rate(dv, i, false); });
+    auto& v = particles.v();
+    auto& e = m_error;
+    auto& dir = m_direction;
+    auto& q = m_product;
+    auto& z = m_change;
+    auto& dv = m_velocityChange;
+    for (auto* a : {&e, &dir, &q, &z}) a->assign(n, 0);
+    dv.resize(n);
+    std::size_t products = 0;
+    // q = dt^2 A d, with dv = -dt J^T d the velocity change of the pressures d.
+    auto multiply = [&](const std::vector<Real>& d) {
+        velocityChanges(ctx, particles, d, dv);
+        rates(ctx, particles, dv, false, q);
+        forEachParticle(n, [&](std::size_t i) { q[i] *= -ctx.dt; }, 4096);
+        ++products;
     };
     auto sum = [&](auto term) { return deterministicSum(n, term); };
-    const Real dt2 = dt * dt;
     // D_i = dt^2 A_ii; particles without neighbours (factor 0) take no pressure.
     auto inverseD = [&](std::size_t i) { return m_factor[i] / dt2; };
-    // Moves the pressures by -alpha d (the direction whose product is in q, dv).
+    // Moves the pressures by -alpha d, d being the direction whose product is in q and dv.
     auto move = [&](Real alpha, const std::vector<Real>& d) {
         forEachParticle(n, [&](std::size_t i) {
-            pressure[i] -= alpha * d[i];
-            if (pressure[i] < 0) pressure[i] = 0;  // round-off at the bound
+            pressure[i] = std::max<Real>(pressure[i] - alpha * d[i], 0);  // the max: round-off at the bound
             e[i] += alpha * q[i];
             v[i] -= alpha * dv[i];
         }, 4096);
     };
-    // Free gradient (particles under pressure) and chopped gradient (particles at zero pressure that want some).
-    auto free = [&](std::size_t i) { return pressure[i] > 0 ? -e[i] : 0.0; };
-    auto chopped = [&](std::size_t i) { return pressure[i] > 0 || m_factor[i] == 0 ? 0.0 : std::min<Real>(-e[i], 0); };
-    auto meanError = [&] {
-        return sum([&](std::size_t i) { return std::abs(free(i) + chopped(i)) / rho0[i]; }) / Real(n);
+    // Gradient on the particles under pressure (free), and on those at zero pressure that want some (chopped).
+    auto free = [&](std::size_t i) { return pressure[i] > 0 ? -e[i] : Real(0); };
+    auto chopped = [&](std::size_t i) {
+        return pressure[i] > 0 || m_factor[i] == 0 ? Real(0) : std::min<Real>(-e[i], 0);
     };
-    constexpr Real kStep = 0.5;   // expansion step length in the scaled variables (the stable Jacobi relaxation)
-    constexpr Real kGamma = 1;    // proportioning threshold
-    errors();
-    std::size_t iteration = 0;
+    // The complementarity residual of the Jacobi solver: |projected gradient| relative to rho_0.
+    auto meanError = [&] { return sum([&](std::size_t i) { return std::abs(free(i) + chopped(i)) / rho0[i]; }) / Real(n); };
+    constexpr Real kGamma = 1;  // proportioning threshold
+
+    rates(ctx, particles, v, true, m_rate);
+    forEachParticle(n, [&](std::size_t i) { e[i] = target(i, m_rate[i]); }, 4096);
     bool restart = true;
-    Real error = meanError();
-    while (true) {
+    std::size_t iteration = 0;
+    for (Real error = meanError();; error = meanError()) {
         const bool converged = error <= tolerance;
         if ((converged && iteration >= std::size_t(m_settings.minIterations)) ||
             iteration >= std::size_t(m_settings.maxIterations)) {
-            if (!converged) {
-                ++(density ? ctx.stats.pressureCapHits : ctx.stats.divergenceCapHits);
-                ctx.stats.warn(fmt::format("step {}: {} solve stopped at {} iterations (mean error {:.3g} > {:.3g}); "
-                                           "lower simulation.time_step.max or raise simulation.pressure.max_iterations",
-                                           ctx.step, density ? "constant-density" : "divergence-free", iteration,
-                                           error, tolerance));
-            }
+            if (!converged) warnCapHit(ctx, which, iteration, error);
             break;
         }
         ++iteration;
-        const Real chopNorm = sum([&](std::size_t i) { return chopped(i) * chopped(i) * inverseD(i); });
-        const Real reducedFree = sum([&](std::size_t i) {
-            if (pressure[i] <= 0 || m_factor[i] == 0) return 0.0;
-            const Real scaled = std::min(pressure[i] / (kStep * inverseD(i)), free(i));  // in gradient units
-            return scaled * free(i) * inverseD(i);
+        // Proportional: the chopped gradient is small against what the free particles can still move.
+        const Real chop = sum([&](std::size_t i) { return chopped(i) * chopped(i) * inverseD(i); });
+        const Real room = sum([&](std::size_t i) {
+            if (pressure[i] <= 0) return Real(0);
+            return std::min(pressure[i] / (kRelaxation * inverseD(i)), free(i)) * free(i) * inverseD(i);
         });
-        if (chopNorm <= kGamma * kGamma * reducedFree) {
-            if (restart) forEachParticle(n, [&](std::size_t i) { dir[i] = inverseD(i) * free(i); }, 4096);
-            restart = false;
-            product(dir);
-            const Real dq = sum([&](std::size_t i) { return dir[i] * q[i]; });
-            if (dq <= 0) break;  // nothing left to move
-            const Real cg = sum([&](std::size_t i) { return free(i) * dir[i]; }) / dq;
-            Real feasible = std::numeric_limits<Real>::infinity();
-            for (std::size_t i = 0; i < n; ++i)
-                if (dir[i] > 0) feasible = std::min(feasible, pressure[i] / dir[i]);
-            if (cg <= feasible) {
-                move(cg, dir);
-                forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * free(i); }, 4096);
-                const Real beta = sum([&](std::size_t i) { return z[i] * q[i]; }) / dq;
-                forEachParticle(n, [&](std::size_t i) { dir[i] = z[i] - beta * dir[i]; }, 4096);
-            } else {
-                // Expansion: to the bound, then a projected gradient step, and CG starts again.
-                move(feasible, dir);
-                forEachParticle(n, [&](std::size_t i) {
-                    const Real next = std::max<Real>(pressure[i] - kStep * inverseD(i) * free(i), 0);
-                    z[i] = pressure[i] - next;
-                }, 4096);
-                product(z);
-                move(1, z);
-                restart = true;
-            }
-        } else {
+        if (chop > kGamma * kGamma * room) {
             // Proportioning: release the particles at zero pressure that their neighbours compress.
             forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * chopped(i); }, 4096);
-            product(z);
-            const Real dq = sum([&](std::size_t i) { return z[i] * q[i]; });
-            if (dq <= 0) break;
-            const Real alpha = sum([&](std::size_t i) { return chopped(i) * z[i]; }) / dq;
-            move(alpha, z);
+            multiply(z);
+            const Real zq = sum([&](std::size_t i) { return z[i] * q[i]; });
+            if (!(zq > 0)) break;
+            move(sum([&](std::size_t i) { return chopped(i) * z[i]; }) / zq, z);
+            restart = true;
+            continue;
+        }
+        if (restart) forEachParticle(n, [&](std::size_t i) { dir[i] = inverseD(i) * free(i); }, 4096);
+        restart = false;
+        multiply(dir);
+        const Real dq = sum([&](std::size_t i) { return dir[i] * q[i]; });
+        if (!(dq > 0)) break;  // nothing left to move
+        const Real step = sum([&](std::size_t i) { return free(i) * dir[i]; }) / dq;
+        Real feasible = std::numeric_limits<Real>::infinity();  // the longest step that keeps every pressure >= 0
+        for (std::size_t i = 0; i < n; ++i)
+            if (dir[i] > 0) feasible = std::min(feasible, pressure[i] / dir[i]);
+        if (step <= feasible) {
+            move(step, dir);
+            forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * free(i); }, 4096);
+            const Real beta = sum([&](std::size_t i) { return z[i] * q[i]; }) / dq;
+            forEachParticle(n, [&](std::size_t i) { dir[i] = z[i] - beta * dir[i]; }, 4096);
+        } else {
+            // Expansion: up to the bound, then a projected gradient step; conjugate directions start again.
+            move(feasible, dir);
+            forEachParticle(n, [&](std::size_t i) {
+                z[i] = pressure[i] - std::max<Real>(pressure[i] - kRelaxation * inverseD(i) * free(i), 0);
+            }, 4096);
+            multiply(z);
+            move(1, z);
             restart = true;
         }
-        error = meanError();
     }
-    for (std::size_t i = 0; i < n; ++i) m_start[i] = pressure[i] - m_start[i];
+    return products;
+}
+
+template <class Target>
+std::size_t PressureDFSPH::solve(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
+                                 Target target) {
+    if (particles.size() == 0) return 0;
+    m_start = pressure;
+    const std::size_t iterations = m_settings.solver == PressureSettings::Solver::Jacobi
+                                       ? solveJacobi(which, ctx, particles, pressure, target)
+                                       : solveMprgp(which, ctx, particles, pressure, target);
+    // What this solve added to the pressures applied before it.
+    for (std::size_t i = 0; i < particles.size(); ++i) m_start[i] = pressure[i] - m_start[i];
     addBoundaryLoads(ctx, particles, m_start);
-    return iteration;
-}
-
-void PressureDFSPH::applyPressure(const StepContext& ctx, ParticleSet& particles, const std::vector<Real>& s) const {
-    // v_i -= dt (sum_j m_j (s_i + s_j) grad W_ij + kWall sum_k Psi_k s_i grad W_ik): the boundary mirrors the
-    // particle's own pressure [AIA+12].
-    const Real dt = ctx.dt;
-    const auto& x = particles.x();
-    const auto& m = particles.mass();
-    auto& v = particles.v();
-    forEachParticle(particles.size(), [&](std::size_t i) {
-        Vec3 a = Vec3::Zero();
-        for (std::uint32_t j : ctx.fluidNeighbours.of(i)) a += m[j] * (s[i] + s[j]) * ctx.kernel.gradW(x[i] - x[j]);
-        for (std::uint32_t k : ctx.boundaryNeighbours.of(i))
-            a += kWall * ctx.restDensity[i] * ctx.boundary.volume[k] * s[i] * ctx.kernel.gradW(x[i] - ctx.boundary.x[k]);
-        v[i] -= dt * a;
-    });
-}
-
-void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles) {
-    if (particles.size() == 0) return;
-    applyPressure(ctx, particles, *m_pressure);
-    addBoundaryLoads(ctx, particles, *m_pressure);
+    return iterations;
 }
 
 void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const {
@@ -270,13 +261,14 @@ void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& partic
     // boundaries gave the fluid follows from the final pressures. Sequential: a deterministic sum.
     const auto& x = particles.x();
     const auto& m = particles.mass();
+    const auto& b = ctx.boundaryNeighbours;
     const Real dt = ctx.dt;
     for (std::size_t i = 0; i < particles.size(); ++i) {
         if (s[i] == 0) continue;
-        for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+        for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+            const std::uint32_t k = b.indices[p];
             // Impulse on the body: the opposite of what the body gave particle i.
-            const Vec3 j = dt * m[i] * kWall * ctx.restDensity[i] * ctx.boundary.volume[k] * s[i] *
-                           ctx.kernel.gradW(x[i] - ctx.boundary.x[k]);
+            const Vec3 j = (dt * m[i] * s[i] * m_boundaryWeights[p]) * (x[i] - ctx.boundary.x[k]);
             ctx.loads.add(ctx.boundary, k, j, ctx.time + dt);
         }
     }
@@ -285,10 +277,9 @@ void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& partic
 void PressureDFSPH::solveDensity(StepContext& ctx, ParticleSet& particles) {
     const Real dt = ctx.dt;
     // rho* - rho_0 = rho + dt Drho/Dt - rho_0 [BK17 Eq. 8]
-    ctx.stats.pressureIterations += solve(Solve::Density, ctx, particles, *m_pressure,
-                                          [&](std::size_t i, Real rate) {
-                                              return ctx.density[i] + dt * rate - ctx.restDensity[i];
-                                          });
+    ctx.stats.pressureIterations += solve(Solve::Density, ctx, particles, *m_pressure, [&](std::size_t i, Real rate) {
+        return ctx.density[i] + dt * rate - ctx.restDensity[i];
+    });
 }
 
 void PressureDFSPH::solveDivergence(StepContext& ctx, ParticleSet& particles) {

@@ -6,9 +6,10 @@
 
 namespace ganache {
 
-/// The constant-density and divergence-free solves. The constant-density pressure kappa / rho is kept per
-/// particle as an uncached attribute (kPressure in pressure_dfsph.cpp) to warm-start the next step. Pressures stay >= 0 (a fluid
-/// pushes, it never pulls), so each solve is a projected, relaxed Jacobi iteration.
+/// The constant-density and divergence-free solves. The constant-density pressure kappa / rho is kept per particle as
+/// an uncached attribute to warm-start the next step. Pressures stay >= 0 (a fluid pushes, it never pulls): each solve
+/// is a bound-constrained problem, solved by projected conjugate gradients (MPRGP) or DFSPH's relaxed Jacobi
+/// (PressureSettings::solver). Every sweep reads the kernel gradients of the step's pairs (StepContext::gradients).
 class PressureDFSPH {
 public:
     PressureDFSPH(const PressureSettings& settings, ParticleSet& particles);
@@ -22,33 +23,44 @@ public:
     /// Constant-density solve on the predicted velocities, before advection, from the pressures applied so far
     /// (the warm start, and earlier passes of the step).
     void solveDensity(StepContext& ctx, ParticleSet& particles);
-    /// Divergence-free solve on the velocities after advection.
+    /// Divergence-free solve on the velocities of the current positions.
     void solveDivergence(StepContext& ctx, ParticleSet& particles);
 
 private:
     enum class Solve { Density, Divergence };
-    // The shared iteration: `target(i, Drho/Dt)` is the signed density error [kg/m^3] particle i must remove;
-    // stops when the mean complementarity residual relative to rho_0 is below the solve's tolerance. Returns the
-    // iterations.
+    // The solve shared by both: `target(i, Drho/Dt)` is the signed density error [kg/m^3] particle i must remove;
+    // it stops when the mean complementarity residual relative to rho_0 is below the solve's tolerance. Returns the
+    // iterations (products with the system).
     template <class Target>
-    std::size_t solve(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
-                      Target target);
-
+    std::size_t solve(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure, Target target);
     template <class Target>
     std::size_t solveMprgp(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
                            Target target);
-    // v -= dt grad(s) / rho: the velocity change of pressures s (kappa / rho) [BK17].
-    void applyPressure(const StepContext& ctx, ParticleSet& particles, const std::vector<Real>& s) const;
+    template <class Target>
+    std::size_t solveJacobi(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
+                            Target target);
+    // Drho/Dt of every particle for the velocities u, with the bodies' own velocities when withBodies (the
+    // system's product leaves them out).
+    void rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u, bool withBodies,
+               std::vector<Real>& out) const;
+    // -dt (sum_j m_j (s_i + s_j) grad W_ij + kWall sum_k Psi_k s_i grad W_ik): every particle's velocity change from
+    // the pressures s (kappa / rho); the boundary mirrors the particle's own pressure [AIA+12, BK17].
+    void velocityChanges(const StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s,
+                         std::vector<Vec3>& out) const;
     // Adds the impulse the pressures `s` gave through the boundary to each body's load.
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const;
+    void warnCapHit(StepContext& ctx, Solve which, std::size_t iterations, Real error) const;
 
     PressureSettings m_settings;
-    std::vector<Real> m_factor;  // 1 / denominator, 0 where it vanishes (lone particles)
-    std::vector<Real> m_rate;    // Drho/Dt of the current iteration
-    std::vector<Real> m_step;    // this iteration's change of the pressure value
+    std::vector<Real> m_factor;     // 1 / A_ii, 0 where it vanishes (lone particles)
+    // Per pair of the step: m_j g_ij for fluid pairs, kWall rho_0i V_k g_ik for boundary pairs (grad W = g x).
+    std::vector<Real> m_weights, m_boundaryWeights;
     std::vector<Real>* m_pressure;  // constant-density pressure, warm start of the next step
     std::vector<Real> m_pressureV;  // divergence-free pressure of this step
-    std::vector<Real> m_start;      // pressures at the start of a solve that does not warm-start
+    std::vector<Real> m_start;      // pressures at the start of a solve
+    // Scratch of the solvers, kept between steps.
+    std::vector<Real> m_error, m_direction, m_product, m_change, m_residual, m_rate;
+    std::vector<Vec3> m_velocityChange;
 };
 
 }  // namespace ganache

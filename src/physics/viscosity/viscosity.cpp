@@ -31,17 +31,25 @@ Real fieldDot(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
 ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
                                        const std::vector<Vec3>& v, std::vector<Vec3>& x, Real tolerance,
                                        std::size_t maxIterations) {
+    std::vector<Vec3> mv(b.size()), mx(b.size());
+    multiply(v, mv);
+    multiply(x, mx);
+    return solve(multiply, precondition, b, v, mv, mx, x, tolerance, maxIterations);
+}
+
+ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
+                                       const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
+                                       const std::vector<Vec3>& mx, std::vector<Vec3>& x, Real tolerance,
+                                       std::size_t maxIterations) {
     const std::size_t n = b.size();
     for (auto* a : {&r, &z, &p, &q}) a->resize(n);
-    multiply(v, q);
-    forEachParticle(n, [&](std::size_t i) { r[i] = b[i] - q[i]; });
+    forEachParticle(n, [&](std::size_t i) { r[i] = b[i] - mv[i]; }, 4096);
     scale = std::sqrt(fieldDot(r, r));
     if (scale == 0) {
         std::copy(v.begin(), v.end(), x.begin());
         return {};
     }
-    multiply(x, q);
-    forEachParticle(n, [&](std::size_t i) { r[i] = b[i] - q[i]; });
+    forEachParticle(n, [&](std::size_t i) { r[i] = b[i] - mx[i]; }, 4096);
     precondition(r, z);
     std::copy(z.begin(), z.end(), p.begin());
     Real rz = fieldDot(r, z);
@@ -53,12 +61,12 @@ ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& preco
         forEachParticle(n, [&](std::size_t i) {
             x[i] += alpha * p[i];
             r[i] -= alpha * q[i];
-        });
+        }, 4096);
         precondition(r, z);
         const Real rzNext = fieldDot(r, z);
         const Real beta = rzNext / rz;
         rz = rzNext;
-        forEachParticle(n, [&](std::size_t i) { p[i] = z[i] + beta * p[i]; });
+        forEachParticle(n, [&](std::size_t i) { p[i] = z[i] + beta * p[i]; }, 4096);
         pass.residual = std::sqrt(fieldDot(r, r)) / scale;
         ++pass.iterations;
     }
@@ -125,46 +133,69 @@ void ViscosityMethod::restore(ByteReader& in) {
     in(m_solves), in(m_iterations), in(m_capHits), in(m_worstResidual);
 }
 
-Real ViscosityMethod::pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
-                                      const Vec3& xij) const {
-    const Real h = ctx.kernel.supportRadius();
-    return kTwoDPlus4 * 0.5 * (m_mu(i) + m_mu(j)) * 0.5 * (p.mass()[i] + p.mass()[j]) /
-           (ctx.density[i] * ctx.density[j]) / (xij.squaredNorm() + 0.01 * h * h);
-}
-
-Real ViscosityMethod::boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k,
-                                          const Vec3& xik) const {
-    const Real h = ctx.kernel.supportRadius();
-    return kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
-           (ctx.density[i] * ctx.density[i]) / (xik.squaredNorm() + 0.01 * h * h);
+void ViscosityMethod::computeCoefficients(const StepContext& ctx, const ParticleSet& particles) {
+    const auto& x = particles.x();
+    const auto& m = particles.mass();
+    const auto& f = ctx.fluidNeighbours;
+    const auto& b = ctx.boundaryNeighbours;
+    const Real h = ctx.kernel.supportRadius(), eps = 0.01 * h * h;
+    m_pairs.resize(f.pairs());
+    m_boundaryPairs.resize(sticky() ? b.pairs() : 0);
+    m_fluidBlocks.resize(particles.size());
+    forEachParticle(particles.size(), [&](std::size_t i) {
+        // 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)) g_ij, mu and m averaged over the pair so that the
+        // operator is symmetric [Eq. 9]; the diagonal block sums k_ij x_ij x_ij^T
+        Mat3 block = Mat3::Zero();
+        for (std::size_t p = f.first(i); p < f.last(i); ++p) {
+            const std::uint32_t j = f.indices[p];
+            const Vec3 xij = x[i] - x[j];
+            m_pairs[p] = kTwoDPlus4 * 0.5 * (m_mu(i) + m_mu(j)) * 0.5 * (m[i] + m[j]) /
+                         (ctx.density[i] * ctx.density[j]) / (xij.squaredNorm() + eps) * ctx.gradients.fluid[p];
+            block += m_pairs[p] * xij * xij.transpose();
+        }
+        m_fluidBlocks[i] = block;
+        // 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) g_ik [Eq. 11-12]
+        if (sticky())
+            for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+                const std::uint32_t k = b.indices[p];
+                m_boundaryPairs[p] = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
+                                     (ctx.density[i] * ctx.density[i]) /
+                                     ((x[i] - ctx.boundary.x[k]).squaredNorm() + eps) * ctx.gradients.boundary[p];
+            }
+    });
 }
 
 Vec3 ViscosityMethod::laplacian(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                                 std::size_t i, bool withBodyVelocity) const {
     const auto& x = particles.x();
+    const auto& f = ctx.fluidNeighbours;
     Vec3 a = Vec3::Zero();
-    for (std::uint32_t j : ctx.fluidNeighbours.of(i)) {
+    for (std::size_t p = f.first(i); p < f.last(i); ++p) {
+        const std::uint32_t j = f.indices[p];
         const Vec3 xij = x[i] - x[j];
-        a += pairCoefficient(ctx, particles, i, j, xij) * xij.dot(in[i] - in[j]) * ctx.kernel.gradW(xij);
+        a += (m_pairs[p] * xij.dot(in[i] - in[j])) * xij;
     }
-    if (sticky())
-        for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+    if (sticky()) {
+        const auto& b = ctx.boundaryNeighbours;
+        for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+            const std::uint32_t k = b.indices[p];
             const Vec3 xik = x[i] - ctx.boundary.x[k];
             const Vec3 relative = withBodyVelocity ? Vec3(in[i] - ctx.boundary.v[k]) : in[i];
-            a += boundaryCoefficient(ctx, i, k, xik) * xik.dot(relative) * ctx.kernel.gradW(xik);
+            a += (m_boundaryPairs[p] * xik.dot(relative)) * xik;
         }
+    }
     return a;
 }
 
 Mat3 ViscosityMethod::boundaryBlock(const StepContext& ctx, const ParticleSet& particles, std::size_t i,
                                     Vec3& bodyTerm) const {
     Mat3 block = Mat3::Zero();
-    for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+    const auto& b = ctx.boundaryNeighbours;
+    for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+        const std::uint32_t k = b.indices[p];
         const Vec3 xik = particles.x()[i] - ctx.boundary.x[k];
-        const Real c = boundaryCoefficient(ctx, i, k, xik);
-        const Vec3 g = ctx.kernel.gradW(xik);
-        block += c * g * xik.transpose();
-        bodyTerm += c * ctx.boundary.v[k].dot(xik) * g;
+        block += m_boundaryPairs[p] * xik * xik.transpose();
+        bodyTerm += (m_boundaryPairs[p] * ctx.boundary.v[k].dot(xik)) * xik;
     }
     return block;
 }
@@ -193,6 +224,7 @@ void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
     const bool guessWithChange = m_params.warmStart || !firstPass;
     m_out.resize(n);
     forEachParticle(n, [&](std::size_t i) { m_out[i] = guessWithChange ? Vec3(v[i] + dv[i]) : v[i]; });
+    computeCoefficients(ctx, particles);
 
     m_last = solve(ctx, particles, m_out);
     if (!std::isfinite(m_last.residual))
@@ -223,11 +255,12 @@ void ViscosityMethod::addBoundaryLoads(StepContext& ctx, const ParticleSet& part
     const auto& x = particles.x();
     const auto& v = particles.v();
     const auto& m = particles.mass();
+    const auto& b = ctx.boundaryNeighbours;
     for (std::size_t i = 0; i < particles.size(); ++i)
-        for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
+        for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+            const std::uint32_t k = b.indices[p];
             const Vec3 xik = x[i] - ctx.boundary.x[k];
-            const Vec3 j = -ctx.dt * m[i] * boundaryCoefficient(ctx, i, k, xik) * xik.dot(v[i] - ctx.boundary.v[k]) *
-                           ctx.kernel.gradW(xik);
+            const Vec3 j = (-ctx.dt * m[i] * m_boundaryPairs[p] * xik.dot(v[i] - ctx.boundary.v[k])) * xik;
             m_passLoads.add(ctx.boundary, k, j, ctx.time + ctx.dt);
         }
     ctx.loads.add(m_passLoads);

@@ -24,9 +24,11 @@ struct ViscosityParams : EffectParams {
     Method method = Method::Weiler2018;
     std::optional<Real> mu;      ///< dynamic viscosity for every fluid [Pa s]; unset: each fluid's material
     Real boundaryMu = 0;         ///< boundary viscosity mu_b [Pa s]: 0 slips, large sticks
-    /// CG stops when |r| <= tolerance |b - (I - dt A) v_df|, the residual relative to the correction the solve
-    /// has to make. At 1e-3 the warm start's leftover added 2.4 % angular momentum to a spinning cube in 0.5 s;
-    /// at 1e-4 it keeps it to 0.01 %.
+    /// CG stops when |r| <= tolerance |b - (I - dt A) v|, the residual relative to the correction the solve has to
+    /// make. The rigid motions are solved exactly after CG, so the tolerance no longer decides what happens to
+    /// momentum or spin, but it does decide how stiff a stiff fluid stays: a 5e6 Pa s body on a slipping floor kept
+    /// parts moving at 1.4 cm/s at 1e-4, 10 cm/s at 1e-3 (the non-rigid, smooth modes that block Jacobi barely
+    /// reaches). Looser settings are as accurate for runny fluids at a third of the iterations (ganache study).
     Real tolerance = 1e-4;
     std::int64_t maxIterations = 100;  ///< CG iterations per solve; explicit: sub-steps per step (default 10,000)
     /// none, 3x3 block Jacobi, or block Jacobi plus the fluid's rigid motions as a coarse space (two-level;
@@ -79,6 +81,10 @@ struct ConjugateGradient {
     /// system (scale 0) x becomes v. On return `r` holds the residual b - M x.
     ViscosityPass solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
                         const std::vector<Vec3>& v, std::vector<Vec3>& x, Real tolerance, std::size_t maxIterations);
+    /// The same with the products M v (mv) and M x (mx) of the initial guess given.
+    ViscosityPass solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
+                        const std::vector<Vec3>& v, const std::vector<Vec3>& mv, const std::vector<Vec3>& mx,
+                        std::vector<Vec3>& x, Real tolerance, std::size_t maxIterations);
 };
 
 /// A viscosity method as an effect. apply() takes back an earlier coupled pass's change, asks the method for the
@@ -103,12 +109,15 @@ protected:
     /// The warning of a pass that ended above the tolerance.
     virtual std::string capMessage(const StepContext& ctx, const ViscosityPass& pass) const;
 
-    /// 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)), the pair term of Eq. 7 with mu and m averaged
-    /// over the pair, so the operator is symmetric [Eq. 9].
-    Real pairCoefficient(const StepContext& ctx, const ParticleSet& p, std::size_t i, std::size_t j,
-                         const Vec3& xij) const;
-    /// 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)), boundary particle k's term [Eq. 11-12].
-    Real boundaryCoefficient(const StepContext& ctx, std::size_t i, std::size_t k, const Vec3& xik) const;
+    /// Eq. 7's coefficient of each pair with its kernel gradient factor, at the step's positions, densities and
+    /// viscosities: k_ij = 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)) g_ij (mu and m averaged over the
+    /// pair, so the operator is symmetric [Eq. 9]; grad W_ij = g_ij x_ij), in the order of the fluid neighbour
+    /// lists; with boundary viscosity, k_ik = 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) g_ik [Eq. 11-12].
+    /// apply() computes them before solve(), so no product evaluates them again.
+    const std::vector<Real>& pairs() const { return m_pairs; }
+    const std::vector<Real>& boundaryPairs() const { return m_boundaryPairs; }
+    /// sum_j k_ij x_ij x_ij^T: the fluid's part of particle i's diagonal block of A (computed with pairs()).
+    const Mat3& fluidBlock(std::size_t i) const { return m_fluidBlocks[i]; }
     bool sticky() const { return m_params.boundaryMu > 0; }
     /// The boundary's share of particle i's implicit system [Eq. 11-12]: returns sum_k c_ik grad W_ik x_ik^T (the
     /// operator's diagonal block, per unit mass) and adds sum_k c_ik (v_k . x_ik) grad W_ik, the bodies'
@@ -126,9 +135,12 @@ protected:
 
 private:
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, bool firstPass);
+    void computeCoefficients(const StepContext& ctx, const ParticleSet& particles);
 
     std::vector<Vec3>* m_dv;  // the last pass's change, a particle attribute (kChange in viscosity.cpp)
     std::vector<Vec3> m_out;
+    std::vector<Real> m_pairs, m_boundaryPairs;  // see pairs()
+    std::vector<Mat3> m_fluidBlocks;
     BodyLoads m_passLoads;    // the viscous loads of the latest pass, which a later pass of the step replaces
     std::size_t m_lastStep = 0;
     bool m_hasSolved = false;

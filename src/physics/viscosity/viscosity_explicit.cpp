@@ -22,18 +22,17 @@ Real ViscosityExplicit::stableStep(const StepContext& ctx, const ParticleSet& pa
         tbb::blocked_range<std::size_t>(0, particles.size(), 1024), Real(0),
         [&](const tbb::blocked_range<std::size_t>& range, Real worst) {
             for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                // Block A_ij = -c_ij grad W_ij x_ij^T has norm c_ij |grad W_ij| |x_ij|; it appears off the
-                // diagonal and again in the diagonal block A_ii.
+                // Block A_ij = -k_ij x_ij x_ij^T has norm |k_ij| |x_ij|^2; it appears off the diagonal and again in
+                // the diagonal block A_ii.
                 Real row = 0;
-                for (std::uint32_t j : ctx.fluidNeighbours.of(i)) {
-                    const Vec3 xij = x[i] - x[j];
-                    row += 2 * pairCoefficient(ctx, particles, i, j, xij) * ctx.kernel.gradW(xij).norm() * xij.norm();
+                const auto& f = ctx.fluidNeighbours;
+                for (std::size_t p = f.first(i); p < f.last(i); ++p)
+                    row += 2 * std::abs(pairs()[p]) * (x[i] - x[f.indices[p]]).squaredNorm();
+                if (sticky()) {
+                    const auto& b = ctx.boundaryNeighbours;
+                    for (std::size_t p = b.first(i); p < b.last(i); ++p)
+                        row += std::abs(boundaryPairs()[p]) * (x[i] - ctx.boundary.x[b.indices[p]]).squaredNorm();
                 }
-                if (sticky())
-                    for (std::uint32_t k : ctx.boundaryNeighbours.of(i)) {
-                        const Vec3 xik = x[i] - ctx.boundary.x[k];
-                        row += boundaryCoefficient(ctx, i, k, xik) * ctx.kernel.gradW(xik).norm() * xik.norm();
-                    }
                 worst = std::max(worst, row);
             }
             return worst;

@@ -1,6 +1,7 @@
 #include "physics/viscosity/viscosity_weiler2018.h"
 
 #include "core/parallel.h"
+#include "physics/pair_sweeps.h"
 
 #include <Eigen/Eigenvalues>
 
@@ -18,18 +19,30 @@ Mat3 cross(const Vec3& a) {
 
 }  // namespace
 
-void RigidModes::build(const std::vector<Vec3>& x, const std::vector<Mat3>* extra, Real minScale) {
+void RigidModes::build(const std::vector<Vec3>& x, const std::vector<Mat3>* extra,
+                       const std::vector<std::uint32_t>& withExtra, Real minScale) {
     const std::size_t n = x.size();
     m_centre = deterministicSum<Vec3>(n, [&](std::size_t i) { return x[i]; }, Vec3::Zero()) / Real(n);
     const Real spread = deterministicSum(n, [&](std::size_t i) { return (x[i] - m_centre).squaredNorm(); });
     m_scale = std::max(std::sqrt(spread / Real(n)), minScale);
     // E = Z^T M Z = sum_i Z_i^T (I + extra_i) Z_i: the fluid's own coupling has the rigid motions in its null
-    // space, so only the block-diagonal boundary part (when there is one) adds to the identity.
-    const Mat6 e = deterministicSum<Mat6>(n, [&](std::size_t i) -> Mat6 {
-        Eigen::Matrix<Real, 3, 6> z;
-        z << Mat3::Identity(), -cross(arm(x[i]));
-        return extra ? Mat6(z.transpose() * (Mat3::Identity() + (*extra)[i]) * z) : Mat6(z.transpose() * z);
-    }, Mat6::Zero());
+    // space, so only the block-diagonal boundary part (when there is one) adds to the identity. With Z_i = [I, -[a]x]
+    // the identity's share is [[n I, -[sum a]x], [[sum a]x, sum (|a|^2 I - a a^T)]]; the boundary's is summed over the
+    // particles that have a boundary part only.
+    const Vec3 arms = deterministicSum<Vec3>(n, [&](std::size_t i) { return arm(x[i]); }, Vec3::Zero());
+    const Mat3 second = deterministicSum<Mat3>(n, [&](std::size_t i) -> Mat3 {
+        const Vec3 a = arm(x[i]);
+        return a * a.transpose();
+    }, Mat3::Zero());
+    Mat6 e;
+    e << Real(n) * Mat3::Identity(), -cross(arms), cross(arms), second.trace() * Mat3::Identity() - second;
+    if (extra)
+        e += deterministicSum<Mat6>(withExtra.size(), [&](std::size_t k) -> Mat6 {
+            const std::uint32_t i = withExtra[k];
+            Eigen::Matrix<Real, 3, 6> z;
+            z << Mat3::Identity(), -cross(arm(x[i]));
+            return z.transpose() * (*extra)[i] * z;
+        }, Mat6::Zero());
     // Pseudo-inverse: a lone particle has no rotations, particles on a line none about that line.
     const Eigen::SelfAdjointEigenSolver<Mat6> eigen(e);
     const Vec6 values = eigen.eigenvalues();
@@ -67,8 +80,11 @@ std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vect
 void ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                                    std::vector<Vec3>& out) const {
     // (I - dt A) in, with the bodies' velocities on the right-hand side
-    forEachParticle(particles.size(),
-                    [&](std::size_t i) { out[i] = in[i] - ctx.dt * laplacian(ctx, particles, in, i, false); });
+    forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
+        sweeps::viscousProduct(begin, end, {&ctx.fluidNeighbours, pairs().data()},
+                               {&ctx.boundaryNeighbours, sticky() ? boundaryPairs().data() : nullptr},
+                               particles.x().data(), ctx.boundary.x.data(), in.data(), ctx.dt, out.data());
+    });
 }
 
 ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& particles, std::vector<Vec3>& out) {
@@ -82,11 +98,7 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     // Right-hand side [Eq. 12] and block-diagonal preconditioner [Eq. 11].
     if (sticky()) m_boundaryBlock.resize(n);
     forEachParticle(n, [&](std::size_t i) {
-        Mat3 aii = Mat3::Zero();
-        for (std::uint32_t j : ctx.fluidNeighbours.of(i)) {
-            const Vec3 xij = x[i] - x[j];
-            aii += pairCoefficient(ctx, particles, i, j, xij) * ctx.kernel.gradW(xij) * xij.transpose();
-        }
+        Mat3 aii = fluidBlock(i);
         Vec3 bodies = Vec3::Zero();
         if (sticky()) {
             const Mat3 aik = boundaryBlock(ctx, particles, i, bodies);
@@ -98,7 +110,11 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
                                    ? Mat3(Mat3::Identity())
                                    : Mat3(Mat3(Mat3::Identity() - dt * aii).inverse());
     });
-    m_rigid.build(x, sticky() ? &m_boundaryBlock : nullptr, ctx.kernel.supportRadius());
+    m_nearBoundary.clear();
+    if (sticky())
+        for (std::size_t i = 0; i < n; ++i)
+            if (ctx.boundaryNeighbours.first(i) != ctx.boundaryNeighbours.last(i)) m_nearBoundary.push_back(std::uint32_t(i));
+    m_rigid.build(x, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary, ctx.kernel.supportRadius());
     const bool twoLevel = m_params.preconditioner == ViscosityParams::Preconditioner::Rigid;
     // z = P r: the block diagonal, plus (two-level) the exact answer within the rigid motions, which the block
     // diagonal of a stiff fluid barely moves (their eigenvalue is 1 against up to dt mu / (rho h^2) for the rest).
@@ -113,8 +129,16 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     const auto system = [&](const std::vector<Vec3>& in, std::vector<Vec3>& result) {
         multiply(ctx, particles, in, result);
     };
-    ViscosityPass pass =
-        m_cg.solve(system, precondition, m_b, v, out, m_params.tolerance, std::size_t(m_params.maxIterations));
+    // The correction the solve has to make, b - M v, and the warm start's residual b - M out, from one sweep.
+    m_start.resize(n);
+    m_guess.resize(n);
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        sweeps::viscousProducts(begin, end, {&ctx.fluidNeighbours, pairs().data()},
+                                {&ctx.boundaryNeighbours, sticky() ? boundaryPairs().data() : nullptr}, x.data(),
+                                ctx.boundary.x.data(), v.data(), out.data(), dt, m_start.data(), m_guess.data());
+    });
+    ViscosityPass pass = m_cg.solve(system, precondition, m_b, v, m_start, m_guess, out, m_params.tolerance,
+                                    std::size_t(m_params.maxIterations));
     if (m_cg.scale == 0) return pass;  // v_df already solves the system
     // Whatever CG left, the rigid part of the residual is solved exactly: the fluid's viscous forces then
     // change its total momentum and angular momentum only through the boundary, as viscosity must. Left to

@@ -19,8 +19,10 @@ using Mat6 = Eigen::Matrix<Real, 6, 6>;
 /// alone, so within this space the system is the identity plus the (block-diagonal) boundary part.
 class RigidModes {
 public:
-    /// extra: the boundary part of each particle's diagonal block of the system, or null when there is none.
-    void build(const std::vector<Vec3>& x, const std::vector<Mat3>* extra, Real minScale);
+    /// extra: the boundary part of each particle's diagonal block of the system, or null when there is none;
+    /// withExtra: the particles whose part is not zero.
+    void build(const std::vector<Vec3>& x, const std::vector<Mat3>* extra, const std::vector<std::uint32_t>& withExtra,
+               Real minScale);
     /// Z^T r: the total of r and its moment about the centroid.
     Vec6 project(const std::vector<Vec3>& x, const std::vector<Vec3>& r) const;
     /// (Z^T M Z)^+ y: the rigid motion whose image under the system has the projection y.
@@ -55,6 +57,8 @@ private:
     ConjugateGradient m_cg;
     std::vector<Mat3> m_inverseDiagonal;
     std::vector<Mat3> m_boundaryBlock;  // -dt times the boundary part of each diagonal block, with boundary_mu > 0
+    std::vector<std::uint32_t> m_nearBoundary;  // the particles with a boundary part
+    std::vector<Vec3> m_start, m_guess;         // M v and M out before CG
     RigidModes m_rigid;
 };
 

@@ -1,0 +1,122 @@
+// The solvers' inner loops on their own: one viscous product (I - dt A) v and one pressure product (a velocity change
+// and a density rate) per iteration, on a jittered lattice block in Z order, at 8k, 50k, 200k and 1M particles on 1
+// and 2 threads; beside them the machine's streaming bandwidth (a triad over 256 MiB arrays), so that each product's
+// cost can be set against the time its bytes take to move.
+// Run: build/benchmarks/sweep_bench --benchmark_counters_tabular=true
+
+#include "core/kernels.h"
+#include "core/neighbour_search.h"
+#include "core/parallel.h"
+#include "physics/pair_sweeps.h"
+
+#include <benchmark/benchmark.h>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <random>
+
+using namespace ganache;
+
+namespace {
+
+constexpr Real kRadius = 0.01;
+
+struct Block {
+    std::vector<Vec3> x, v;
+    NeighbourList pairs;
+    std::vector<Real> weight;  // one per pair
+};
+
+// A jittered lattice block of about n particles in Z order, its neighbour lists and a weight per pair.
+Block block(std::size_t n) {
+    const int side = int(std::round(std::cbrt(Real(n))));
+    std::mt19937_64 rng(42);
+    std::uniform_real_distribution<Real> jitter(-0.1, 0.1), unit(-1, 1);
+    Block b;
+    const Real d = 2 * kRadius;
+    for (int k = 0; k < side; ++k)
+        for (int j = 0; j < side; ++j)
+            for (int i = 0; i < side; ++i) b.x.push_back(d * Vec3(i + jitter(rng), j + jitter(rng), k + jitter(rng)));
+    UniformGrid grid(supportRadiusFor(kRadius));
+    grid.build(b.x);
+    std::vector<Vec3> sorted;
+    for (std::uint32_t i : grid.sortedIndices()) sorted.push_back(b.x[i]);
+    b.x.swap(sorted);
+    findFluidNeighbours(grid, b.x, supportRadiusFor(kRadius), b.pairs);
+    for (std::size_t i = 0; i < b.x.size(); ++i) b.v.emplace_back(unit(rng), unit(rng), unit(rng));
+    for (std::size_t p = 0; p < b.pairs.pairs(); ++p) b.weight.push_back(-1e3 * (1 + 0.1 * unit(rng)));
+    return b;
+}
+
+void setCounters(benchmark::State& state, const Block& b, double bytesPerIteration) {
+    const double particles = double(b.x.size());
+    state.counters["particles"] = particles;
+    state.counters["threads"] = double(state.range(1));
+    state.counters["pairs_per_particle"] = double(b.pairs.pairs()) / particles;
+    state.counters["ns_per_particle"] =
+        benchmark::Counter(particles, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+    state.counters["bytes_per_particle"] = bytesPerIteration / particles;
+    state.SetBytesProcessed(std::int64_t(state.iterations() * bytesPerIteration));
+}
+
+// Bytes a product moves at least once: the lists (offsets, indices), the pair weights, the input and output vectors
+// and the positions; neighbours' values are assumed to come from cache (the particles are in Z order).
+double productBytes(const Block& b, double perParticleIn, double perParticleOut) {
+    return double(b.x.size()) * (8 + 24 + perParticleIn + perParticleOut) + double(b.pairs.pairs()) * (4 + 8);
+}
+
+void viscous(benchmark::State& state) {
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(1)));
+    const Block b = block(std::size_t(state.range(0)));
+    std::vector<Vec3> out(b.x.size());
+    for (auto _ : state) {
+        forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
+            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, {}, b.x.data(), nullptr, b.v.data(), 1e-3,
+                                   out.data());
+        });
+        benchmark::DoNotOptimize(out.data());
+    }
+    setCounters(state, b, productBytes(b, 24, 24));
+}
+
+void pressure(benchmark::State& state) {
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(1)));
+    const Block b = block(std::size_t(state.range(0)));
+    std::vector<Real> s(b.x.size(), 1), rate(b.x.size());
+    std::vector<Vec3> dv(b.x.size());
+    for (auto _ : state) {
+        forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
+            sweeps::pressureChange(begin, end, {&b.pairs, b.weight.data()}, {}, b.x.data(), nullptr, s.data(), 1e-3,
+                                   dv.data());
+        });
+        forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
+            sweeps::densityRate(begin, end, {&b.pairs, b.weight.data()}, {}, b.x.data(), nullptr, dv.data(), nullptr,
+                                rate.data());
+        });
+        benchmark::DoNotOptimize(rate.data());
+    }
+    setCounters(state, b, productBytes(b, 8, 24) + productBytes(b, 24, 8));
+}
+
+// a = b + s c over arrays far larger than the caches: what the memory system streams.
+void triad(benchmark::State& state) {
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(0)));
+    const std::size_t n = std::size_t(32) << 20;  // 32 Mi doubles: 256 MiB per array
+    std::vector<double> a(n), b(n, 1), c(n, 2);
+    for (auto _ : state) {
+        forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+            for (std::size_t i = begin; i < end; ++i) a[i] = b[i] + 3 * c[i];
+        }, 1 << 16);
+        benchmark::DoNotOptimize(a.data());
+    }
+    state.SetBytesProcessed(std::int64_t(state.iterations() * 3 * 8 * n));
+    state.counters["threads"] = double(state.range(0));
+}
+
+}  // namespace
+
+BENCHMARK(viscous)->ArgsProduct({{8000, 50653, 195112, 1000000}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(pressure)->ArgsProduct({{8000, 50653, 195112, 1000000}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(triad)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+BENCHMARK_MAIN();

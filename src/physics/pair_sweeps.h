@@ -1,0 +1,40 @@
+#pragma once
+// The sweeps over neighbour pairs that every solver iteration makes, on plain arrays so that the compiler turns them
+// into SIMD loops (pair_sweeps.cpp is compiled with reassociation allowed; see src/CMakeLists.txt). Each pair's
+// geometry is computed once per step: the solvers pass per-pair weights in the order of the neighbour lists, and the
+// sweeps only combine them with the current vectors. A particle's sum is always taken in the same order, so results
+// do not depend on the thread count.
+
+#include "core/neighbour_search.h"
+#include "core/types.h"
+
+#include <cstddef>
+
+namespace ganache::sweeps {
+
+/// One neighbour list with a weight per pair (nullptr: the list takes no part).
+struct Pairs {
+    const NeighbourList* list = nullptr;
+    const Real* weight = nullptr;
+};
+
+/// For i in [begin, end): out_i = in_i - dt (sum_p k_p (x_ij . (in_i - in_j)) x_ij + sum_q kb_q (x_ik . in_i) x_ik),
+/// the product (I - dt A) in of the implicit viscosity [WKBB18 Eq. 7-11] with the bodies' velocities left out.
+void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+                    const Vec3* in, Real dt, Vec3* out);
+
+/// viscousProduct for two inputs at once (one pass over the pairs): out1 = (I - dt A) in1, out2 = (I - dt A) in2.
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+                     const Vec3* in1, const Vec3* in2, Real dt, Vec3* out1, Vec3* out2);
+
+/// For i in [begin, end): rate_i = sum_p w_p (u_i - u_j) . x_ij + sum_q wb_q (u_i - ub_k) . x_ik, a density rate
+/// Drho/Dt with w_p = m_j g_p and wb_q the boundary's weight; ub (the bodies' velocities) may be null for zero.
+void densityRate(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+                 const Vec3* u, const Vec3* ub, Real* rate);
+
+/// For i in [begin, end): dv_i = -dt (sum_p w_p (s_i + s_j) x_ij + s_i sum_q wb_q x_ik), the velocity change of
+/// the pressures s [BK17].
+void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+                    const Real* s, Real dt, Vec3* dv);
+
+}  // namespace ganache::sweeps
