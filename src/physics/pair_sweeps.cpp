@@ -11,24 +11,32 @@ inline const Real* raw(const Vec3* v) { return v->data(); }
 
 }  // namespace
 
-void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* xv, const Vec3* xbv,
-                    const Vec3* inv, Real dt, Vec3* out) {
+namespace {
+
+// The viscous product for N inputs in one pass over the pairs (the pairs' geometry is read once for all of them).
+template <int N>
+void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* xv,
+                       const Vec3* xbv, const Vec3* const (&inv)[N], Real dt, Vec3* const (&out)[N]) {
     const Real* x = raw(xv);
-    const Real* v = raw(inv);
+    const Real* v[N];
+    for (int c = 0; c < N; ++c) v[c] = raw(inv[c]);
     const std::uint64_t* off = fluid.list->offsets.data();
     const std::uint32_t* idx = fluid.list->indices.data();
     const Real* k = fluid.weight;
     for (std::size_t i = begin; i < end; ++i) {
         const Real xi0 = x[3 * i], xi1 = x[3 * i + 1], xi2 = x[3 * i + 2];
-        const Real vi0 = v[3 * i], vi1 = v[3 * i + 1], vi2 = v[3 * i + 2];
-        Real a0 = 0, a1 = 0, a2 = 0;
+        Real a[N][3] = {};
         for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
             const std::size_t j = 3 * std::size_t(idx[p]);
             const Real d0 = xi0 - x[j], d1 = xi1 - x[j + 1], d2 = xi2 - x[j + 2];
-            const Real s = k[p] * (d0 * (vi0 - v[j]) + d1 * (vi1 - v[j + 1]) + d2 * (vi2 - v[j + 2]));
-            a0 += s * d0;
-            a1 += s * d1;
-            a2 += s * d2;
+            for (int c = 0; c < N; ++c) {
+                const Real* u = v[c];
+                const Real s =
+                    k[p] * (d0 * (u[3 * i] - u[j]) + d1 * (u[3 * i + 1] - u[j + 1]) + d2 * (u[3 * i + 2] - u[j + 2]));
+                a[c][0] += s * d0;
+                a[c][1] += s * d1;
+                a[c][2] += s * d2;
+            }
         }
         if (boundary.weight) {
             const Real* xb = raw(xbv);
@@ -37,61 +45,34 @@ void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, Pairs bound
             for (std::uint64_t q = boff[i]; q < boff[i + 1]; ++q) {
                 const std::size_t k3 = 3 * std::size_t(bidx[q]);
                 const Real d0 = xi0 - xb[k3], d1 = xi1 - xb[k3 + 1], d2 = xi2 - xb[k3 + 2];
-                const Real s = boundary.weight[q] * (d0 * vi0 + d1 * vi1 + d2 * vi2);
-                a0 += s * d0;
-                a1 += s * d1;
-                a2 += s * d2;
+                for (int c = 0; c < N; ++c) {
+                    const Real* u = v[c];
+                    const Real s = boundary.weight[q] * (d0 * u[3 * i] + d1 * u[3 * i + 1] + d2 * u[3 * i + 2]);
+                    a[c][0] += s * d0;
+                    a[c][1] += s * d1;
+                    a[c][2] += s * d2;
+                }
             }
         }
-        out[i] = Vec3(vi0 - dt * a0, vi1 - dt * a1, vi2 - dt * a2);
+        for (int c = 0; c < N; ++c)
+            out[c][i] = Vec3(v[c][3 * i] - dt * a[c][0], v[c][3 * i + 1] - dt * a[c][1], v[c][3 * i + 2] - dt * a[c][2]);
     }
 }
 
-void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* xv, const Vec3* xbv,
+}  // namespace
+
+void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+                    const Vec3* in, Real dt, Vec3* out) {
+    const Vec3* const inputs[1] = {in};
+    Vec3* const outputs[1] = {out};
+    viscousProductsOf<1>(begin, end, fluid, boundary, x, xb, inputs, dt, outputs);
+}
+
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
                      const Vec3* in1, const Vec3* in2, Real dt, Vec3* out1, Vec3* out2) {
-    const Real* x = raw(xv);
-    const Real* v = raw(in1);
-    const Real* w = raw(in2);
-    const std::uint64_t* off = fluid.list->offsets.data();
-    const std::uint32_t* idx = fluid.list->indices.data();
-    const Real* k = fluid.weight;
-    for (std::size_t i = begin; i < end; ++i) {
-        const Real xi0 = x[3 * i], xi1 = x[3 * i + 1], xi2 = x[3 * i + 2];
-        const Real vi0 = v[3 * i], vi1 = v[3 * i + 1], vi2 = v[3 * i + 2];
-        const Real wi0 = w[3 * i], wi1 = w[3 * i + 1], wi2 = w[3 * i + 2];
-        Real a0 = 0, a1 = 0, a2 = 0, b0 = 0, b1 = 0, b2 = 0;
-        for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
-            const std::size_t j = 3 * std::size_t(idx[p]);
-            const Real d0 = xi0 - x[j], d1 = xi1 - x[j + 1], d2 = xi2 - x[j + 2];
-            const Real s = k[p] * (d0 * (vi0 - v[j]) + d1 * (vi1 - v[j + 1]) + d2 * (vi2 - v[j + 2]));
-            const Real t = k[p] * (d0 * (wi0 - w[j]) + d1 * (wi1 - w[j + 1]) + d2 * (wi2 - w[j + 2]));
-            a0 += s * d0;
-            a1 += s * d1;
-            a2 += s * d2;
-            b0 += t * d0;
-            b1 += t * d1;
-            b2 += t * d2;
-        }
-        if (boundary.weight) {
-            const Real* xb = raw(xbv);
-            const std::uint64_t* boff = boundary.list->offsets.data();
-            const std::uint32_t* bidx = boundary.list->indices.data();
-            for (std::uint64_t q = boff[i]; q < boff[i + 1]; ++q) {
-                const std::size_t k3 = 3 * std::size_t(bidx[q]);
-                const Real d0 = xi0 - xb[k3], d1 = xi1 - xb[k3 + 1], d2 = xi2 - xb[k3 + 2];
-                const Real s = boundary.weight[q] * (d0 * vi0 + d1 * vi1 + d2 * vi2);
-                const Real t = boundary.weight[q] * (d0 * wi0 + d1 * wi1 + d2 * wi2);
-                a0 += s * d0;
-                a1 += s * d1;
-                a2 += s * d2;
-                b0 += t * d0;
-                b1 += t * d1;
-                b2 += t * d2;
-            }
-        }
-        out1[i] = Vec3(vi0 - dt * a0, vi1 - dt * a1, vi2 - dt * a2);
-        out2[i] = Vec3(wi0 - dt * b0, wi1 - dt * b1, wi2 - dt * b2);
-    }
+    const Vec3* const inputs[2] = {in1, in2};
+    Vec3* const outputs[2] = {out1, out2};
+    viscousProductsOf<2>(begin, end, fluid, boundary, x, xb, inputs, dt, outputs);
 }
 
 void densityRate(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* xv, const Vec3* xbv,

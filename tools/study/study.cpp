@@ -109,6 +109,21 @@ std::vector<Knob> knobs(bool quick) {
                                     }),
                      viscosityPoint("weiler2018", true, [](P&) {})};
     all.push_back(method);
+    Knob order{"viscosity_order", "simulation.viscosity_coupling: where the viscosity solve sits in a step", {}};
+    auto orderPoint = [](std::string label, bool isDefault, ViscosityOrder o) {
+        return Point{std::move(label), isDefault, 1, [o](SimulationSetup& s) { s.viscosityOrder = o; }};
+    };
+    order.points = {orderPoint("paper", false, {ViscosityOrder::Kind::Paper, 1}),
+                    orderPoint("predicted", true, {ViscosityOrder::Kind::Predicted, 1}),
+                    orderPoint("coupled 3", false, {ViscosityOrder::Kind::Coupled, 3})};
+    all.push_back(order);
+    Knob solver{"pressure_solver", "simulation.pressure.solver: how DFSPH's solves reach their tolerance", {}};
+    auto solverPoint = [](std::string label, bool isDefault, PressureSettings::Solver which) {
+        return Point{std::move(label), isDefault, 1, [which](SimulationSetup& s) { s.pressure.solver = which; }};
+    };
+    solver.points = {solverPoint("jacobi", false, PressureSettings::Solver::Jacobi),
+                     solverPoint("mprgp", true, PressureSettings::Solver::Mprgp)};
+    all.push_back(solver);
     if (quick)  // the cheapest setting and the default: every knob, chart and sentence of the report is exercised
         for (Knob& k : all) {
             const Point cheapest = k.points.front();
