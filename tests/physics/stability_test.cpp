@@ -224,8 +224,8 @@ TEST(Stability, MeltingFromAlmostSolidToRunny) {
 
 TEST(Stability, StiffBodyWithAThinArmRestsOnASlippingFloor) {
     // Solid chocolate (5e6 Pa s) shaped like a boot with a thin upright arm, on a floor it slides on freely
-    // (boundary_mu 0), with the viscosity solve capped at 40 iterations so that most solves stop early, as the
-    // bunny's did at 100. The body should settle and stay: the stability bounds, no spin about the vertical (the
+    // (boundary_mu 0), with the viscosity solve capped at 12 iterations so that many solves stop early, as the
+    // bunny's did at 100 before the clusters' coarse space. The body should settle and stay: the stability bounds, no spin about the vertical (the
     // floor cannot exert torque about it) and no part moving faster than a few mm/s. Capped solves that let
     // their rigid part drift rocked such a body at 0.26 m/s (and spun the bunny up exponentially).
     World world(0.004, Vec3(-0.2, -0.1, -0.2), Vec3(0.2, 0.3, 0.2));
@@ -233,7 +233,7 @@ TEST(Stability, StiffBodyWithAThinArmRestsOnASlippingFloor) {
     world.block(Vec3(-0.04, 0.002, -0.016), Vec3(0.04, 0.026, 0.016), preset("chocolate"));
     world.block(Vec3(0.016, 0.026, -0.008), Vec3(0.032, 0.098, 0.008), preset("chocolate"));
     world.effect<GravityParams>("gravity");
-    world.effect<ViscosityParams>("viscosity").maxIterations = 40;
+    world.effect<ViscosityParams>("viscosity").maxIterations = 12;
     Simulation sim = world.simulation();
     const Snapshot start = snapshot(sim.particles());
     sim.advanceTo(0.6);

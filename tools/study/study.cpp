@@ -90,7 +90,8 @@ std::vector<Knob> knobs(bool quick) {
     preconditioner.points = {
         viscosityPoint("none", false, [](P& p) { p.preconditioner = P::Preconditioner::None; }),
         viscosityPoint("block_jacobi", false, [](P& p) { p.preconditioner = P::Preconditioner::BlockJacobi; }),
-        viscosityPoint("rigid", true, [](P& p) { p.preconditioner = P::Preconditioner::Rigid; })};
+        viscosityPoint("rigid", false, [](P& p) { p.preconditioner = P::Preconditioner::Rigid; }),
+        viscosityPoint("clusters", true, [](P& p) { p.preconditioner = P::Preconditioner::Clusters; })};
     all.push_back(preconditioner);
     Knob warm{"warm_start", "effects.viscosity.warm_start", {}};
     warm.points = {viscosityPoint("off", false, [](P& p) { p.warmStart = false; }),

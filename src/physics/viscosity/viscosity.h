@@ -31,10 +31,11 @@ struct ViscosityParams : EffectParams {
     /// reaches). Looser settings are as accurate for runny fluids at a third of the iterations (ganache study).
     Real tolerance = 1e-4;
     std::int64_t maxIterations = 100;  ///< CG iterations per solve; explicit: sub-steps per step (default 10,000)
-    /// none, 3x3 block Jacobi, or block Jacobi plus the fluid's rigid motions as a coarse space (two-level;
-    /// weiler2018 only, its default; takahashi2015 defaults to block Jacobi)
-    enum class Preconditioner { None, BlockJacobi, Rigid };
-    Preconditioner preconditioner = Preconditioner::Rigid;
+    /// none, 3x3 block Jacobi, or block Jacobi plus a coarse space (two-level, weiler2018 only): the rigid motions of
+    /// the whole fluid, or of each cluster of nearby particles (weiler2018's default; takahashi2015 defaults to
+    /// block Jacobi)
+    enum class Preconditioner { None, BlockJacobi, Rigid, Clusters };
+    Preconditioner preconditioner = Preconditioner::Clusters;
     bool warmStart = true;       ///< initial guess v_df + dv of the previous step (false: v_df)
 };
 

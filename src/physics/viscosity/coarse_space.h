@@ -1,0 +1,71 @@
+#pragma once
+// Coarse spaces for the implicit viscosity solve (I - dt A) v = b of weiler2018. The viscous coupling between fluid
+// particles leaves rigid motion alone (Eq. 7 is zero for it), so a stiff fluid's slowest modes are the rigid
+// motions of its parts, which the 3x3 block Jacobi preconditioner barely moves. Solving for them exactly, on the
+// whole fluid (RigidModes) or on each cluster of nearby particles (ClusterModes), removes those modes from CG.
+
+#include "core/neighbour_search.h"
+
+#include <Eigen/SparseCholesky>
+
+#include <cstdint>
+#include <vector>
+
+namespace ganache {
+
+using Vec6 = Eigen::Matrix<Real, 6, 1>;
+using Mat6 = Eigen::Matrix<Real, 6, 6>;
+
+/// The rigid motions of all fluid particles together (three translations, three rotations about their centroid).
+/// Within this space the system is the identity plus the (block-diagonal) boundary part.
+class RigidModes {
+public:
+    /// extra: the boundary part of each particle's diagonal block of the system, or null when there is none;
+    /// withExtra: the particles whose part is not zero.
+    void build(const std::vector<Vec3>& x, const std::vector<Mat3>* extra, const std::vector<std::uint32_t>& withExtra,
+               Real minScale);
+    /// Z^T r: the total of r and its moment about the centroid.
+    Vec6 project(const std::vector<Vec3>& x, const std::vector<Vec3>& r) const;
+    /// (Z^T M Z)^+ y: the rigid motion whose image under the system has the projection y.
+    Vec6 solve(const Vec6& y) const { return m_inverse * y; }
+    /// The velocity of the rigid motion y at position xi.
+    Vec3 velocity(const Vec6& y, const Vec3& xi) const { return y.head<3>() + y.tail<3>().cross(arm(xi)); }
+
+private:
+    Vec3 arm(const Vec3& xi) const { return (xi - m_centre) / m_scale; }  // scaled to keep Z^T M Z balanced
+
+    Vec3 m_centre = Vec3::Zero();
+    Real m_scale = 1;
+    Mat6 m_inverse = Mat6::Zero();
+};
+
+/// The rigid motions of each cluster of fluid particles, the clusters being the cells of a grid of side at least
+/// the kernel support (so two particles that interact lie in the same or in adjacent cells). The coarse system
+/// E = Z^T M Z has a 6x6 block per pair of adjacent clusters; it is assembled from the pairs that cross clusters
+/// (pairs within one cluster do not act on its rigid motions) and factored by sparse Cholesky.
+class ClusterModes {
+public:
+    /// Clusters are the cells of side cellSize (at least the kernel support), larger where that would make more than
+    /// maxClusters. The system (I - dt A): fluid pairs with Eq. 7's coefficient k_ij in the order of the neighbour
+    /// lists (the off-diagonal block of pair ij is dt k_ij x_ij x_ij^T), and the boundary part of each particle's
+    /// diagonal block (null: none; withExtra: the particles where it is not zero).
+    void build(const std::vector<Vec3>& x, Real cellSize, std::size_t maxClusters, const NeighbourList& fluid,
+               const std::vector<Real>& pairs, Real dt, const std::vector<Mat3>* extra,
+               const std::vector<std::uint32_t>& withExtra);
+    /// z += Z E^-1 Z^T r: the exact answer within the clusters' rigid motions.
+    void addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const;
+    std::size_t clusters() const { return m_centre.size(); }
+
+private:
+    Vec3 arm(std::size_t c, const Vec3& xi) const { return (xi - m_centre[c]) / m_scale; }
+
+    Real m_scale = 1;
+    std::vector<std::uint32_t> m_of;                      // each particle's cluster
+    std::vector<std::uint32_t> m_members, m_firstMember;  // the particles of cluster c, ascending
+    std::vector<Vec3> m_centre;
+    std::vector<std::int64_t> m_cell;                     // each cluster's grid cell, packed
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<Real>> m_factor;
+    mutable Eigen::Matrix<Real, Eigen::Dynamic, 1> m_rhs;
+};
+
+}  // namespace ganache
