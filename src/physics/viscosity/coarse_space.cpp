@@ -5,7 +5,7 @@
 #include <Eigen/Eigenvalues>
 #include <tbb/parallel_sort.h>
 
-#include <array>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -40,21 +40,18 @@ Mat6 boundaryPart(const Vec3& a, const Mat3& extra) {
     return z.transpose() * extra * z;
 }
 
-/// The cell of x in a grid from the corner lo, packed in 21 bits an axis.
-std::int64_t packCell(const Vec3& x, const Vec3& lo, Real cellSize) {
+constexpr int kAxisBits = 18;
+
+/// The cell of x in a grid from the corner lo, 18 bits an axis, and the particle's group in the low 8 bits.
+std::int64_t clusterKey(const Vec3& x, const Vec3& lo, Real cellSize, std::uint8_t group) {
     std::int64_t key = 0;
     for (int a = 0; a < 3; ++a) {
         const std::int64_t c = std::int64_t(std::floor((x[a] - lo[a]) / cellSize));
-        if (c < 0 || c >= (std::int64_t(1) << 21))
-            throw std::runtime_error("the fluid spans more than 2^21 cells of the viscosity coarse space");
-        key = (key << 21) | c;
+        if (c < 0 || c >= (std::int64_t(1) << kAxisBits))
+            throw std::runtime_error("the fluid spans more than 2^18 cells of the viscosity coarse space");
+        key = (key << kAxisBits) | c;
     }
-    return key;
-}
-
-std::array<std::int64_t, 3> unpackCell(std::int64_t key) {
-    constexpr std::int64_t mask = (std::int64_t(1) << 21) - 1;
-    return {(key >> 42) & mask, (key >> 21) & mask, key & mask};
+    return (key << 8) | group;
 }
 
 }  // namespace
@@ -92,13 +89,14 @@ Vec6 RigidModes::project(const std::vector<Vec3>& x, const std::vector<Vec3>& r)
                                   Vec6::Zero());
 }
 
-void ClusterModes::build(const std::vector<Vec3>& x, Real cellSize, std::size_t maxClusters, const NeighbourList& fluid,
+void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint8_t>* group, Real cellSize,
+                         std::size_t maxClusters, const NeighbourList& fluid,
                          const std::vector<Real>& pairs, Real dt, const std::vector<Mat3>* extra,
                          const std::vector<std::uint32_t>& withExtra) {
     const std::size_t n = x.size();
-    // The clusters: particles sorted by cell, then by index, so the order is the same for any thread count. Cells
-    // grow until there are at most maxClusters, which bounds the cost of factoring E at high resolution.
-    // The grid starts at the fluid's lowest corner, so that growing cells merge clusters.
+    // The clusters: particles sorted by cell and group, then by index, so the order is the same for any thread count.
+    // Cells grow until there are at most maxClusters, which bounds the cost of factoring E at high resolution; the
+    // grid starts at the fluid's lowest corner, so that growing cells merge clusters.
     const Vec3 lo = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, n), Vec3(Vec3::Constant(std::numeric_limits<Real>::infinity())),
         [&](const auto& r, Vec3 m) {
@@ -106,31 +104,35 @@ void ClusterModes::build(const std::vector<Vec3>& x, Real cellSize, std::size_t 
             return m;
         },
         [](const Vec3& a, const Vec3& b) -> Vec3 { return a.cwiseMin(b); });
+    constexpr std::int64_t kOutside = std::numeric_limits<std::int64_t>::max();  // sorts after every cluster
     std::vector<std::pair<std::int64_t, std::uint32_t>> keyed(n);
+    std::size_t inside = 0;  // the particles in some cluster, first in keyed
     for (;;) {
-        forEachParticle(n, [&](std::size_t i) { keyed[i] = {packCell(x[i], lo, cellSize), std::uint32_t(i)}; });
+        forEachParticle(n, [&](std::size_t i) {
+            const std::uint8_t g = group ? (*group)[i] : 0;
+            keyed[i] = {g == kNoCluster ? kOutside : clusterKey(x[i], lo, cellSize, g), std::uint32_t(i)};
+        });
         tbb::parallel_sort(keyed.begin(), keyed.end());
-        std::size_t count = n > 0 ? 1 : 0;
-        for (std::size_t k = 1; k < n; ++k) count += keyed[k].first != keyed[k - 1].first;
+        inside = std::size_t(std::lower_bound(keyed.begin(), keyed.end(), std::make_pair(kOutside, std::uint32_t(0))) -
+                             keyed.begin());
+        std::size_t count = inside > 0 ? 1 : 0;
+        for (std::size_t k = 1; k < inside; ++k) count += keyed[k].first != keyed[k - 1].first;
         if (count <= maxClusters) break;
         cellSize *= std::max(1.1, std::cbrt(Real(count) / Real(maxClusters)));
     }
     m_scale = cellSize;  // arms within +-1 keep E balanced between translations and rotations
-    m_of.resize(n);
-    m_members.resize(n);
+    m_of.assign(n, kNone);
+    m_members.resize(inside);
     m_firstMember.clear();
-    m_cell.clear();
-    for (std::size_t k = 0; k < n; ++k) {
-        if (k == 0 || keyed[k].first != keyed[k - 1].first) {
-            m_firstMember.push_back(std::uint32_t(k));
-            m_cell.push_back(keyed[k].first);
-        }
+    for (std::size_t k = 0; k < inside; ++k) {
+        if (k == 0 || keyed[k].first != keyed[k - 1].first) m_firstMember.push_back(std::uint32_t(k));
         m_members[k] = keyed[k].second;
-        m_of[keyed[k].second] = std::uint32_t(m_cell.size() - 1);
+        m_of[keyed[k].second] = std::uint32_t(m_firstMember.size() - 1);
     }
-    m_firstMember.push_back(std::uint32_t(n));
-    const std::size_t clusters = m_cell.size();
+    const std::size_t clusters = m_firstMember.size();
+    m_firstMember.push_back(std::uint32_t(inside));
     m_centre.resize(clusters);
+    if (clusters == 0) return;
     forEachParticle(clusters, [&](std::size_t c) {
         Vec3 sum = Vec3::Zero();
         for (std::uint32_t k = m_firstMember[c]; k < m_firstMember[c + 1]; ++k) sum += x[m_members[k]];
@@ -142,20 +144,19 @@ void ClusterModes::build(const std::vector<Vec3>& x, Real cellSize, std::size_t 
         for (std::uint32_t i : withExtra) hasExtra[i] = 1;
     }
 
-    // Each cluster's row of E: its 6x6 blocks with the up to 26 adjacent clusters, kept by cell offset (slot 13 is
-    // the cluster itself). Only the lower triangle (neighbours with a higher index) is stored.
-    struct Row {
-        std::array<std::uint32_t, 27> neighbour;
-        std::array<Mat6, 27> block;
-    };
-    constexpr std::uint32_t kNone = ~std::uint32_t(0);
+    // Each cluster's row of E: its diagonal block and its blocks with the adjacent clusters.
     std::vector<std::vector<std::pair<std::uint32_t, Mat6>>> rows(clusters);
     forEachParticle(clusters, [&](std::size_t c) {
-        Row row;
-        row.neighbour.fill(kNone);
-        for (Mat6& b : row.block) b.setZero();
-        row.neighbour[13] = std::uint32_t(c);
-        const auto cell = unpackCell(m_cell[c]);
+        Mat6 diagonal = Mat6::Zero();
+        std::vector<std::pair<std::uint32_t, Mat6>> offDiagonal;
+        std::size_t last = 0;  // the block of the previous pair, usually the one wanted again
+        auto blockWith = [&](std::uint32_t other) -> Mat6& {
+            if (last < offDiagonal.size() && offDiagonal[last].first == other) return offDiagonal[last].second;
+            for (last = 0; last < offDiagonal.size(); ++last)
+                if (offDiagonal[last].first == other) return offDiagonal[last].second;
+            offDiagonal.emplace_back(other, Mat6::Zero());
+            return offDiagonal.back().second;
+        };
         Vec3 arms = Vec3::Zero();
         Mat3 second = Mat3::Zero();
         for (std::uint32_t k = m_firstMember[c]; k < m_firstMember[c + 1]; ++k) {
@@ -163,35 +164,28 @@ void ClusterModes::build(const std::vector<Vec3>& x, Real cellSize, std::size_t 
             const Vec3 ai = arm(c, x[i]);
             arms += ai;
             second += ai * ai.transpose();
-            if (extra && hasExtra[i]) row.block[13] += boundaryPart(ai, (*extra)[i]);
+            if (extra && hasExtra[i]) diagonal += boundaryPart(ai, (*extra)[i]);
             for (std::size_t p = fluid.first(i); p < fluid.last(i); ++p) {
                 const std::uint32_t j = fluid.indices[p];
                 const std::uint32_t cj = m_of[j];
                 if (cj == c) continue;  // a cluster's own pairs leave its rigid motions alone
-                const auto other = unpackCell(m_cell[cj]);
-                int slot = 0;
-                for (int a = 0; a < 3; ++a) {
-                    const std::int64_t step = other[a] - cell[a];
-                    if (step < -1 || step > 1)
-                        throw std::logic_error("viscosity coarse space: a pair spans more than one cluster cell");
-                    slot = 3 * slot + int(step + 1);
-                }
-                row.neighbour[slot] = cj;
                 const Vec3 d = x[i] - x[j];
                 const Real weight = -dt * pairs[p];  // the pair's share of (I - dt A), positive
                 const Vec6 ui = rigidImage(ai, d);
-                row.block[13].noalias() += (weight * ui) * ui.transpose();
-                row.block[slot].noalias() -= (weight * ui) * rigidImage(arm(cj, x[j]), d).transpose();
+                diagonal.noalias() += (weight * ui) * ui.transpose();
+                if (cj != kNone) blockWith(cj).noalias() -= (weight * ui) * rigidImage(arm(cj, x[j]), d).transpose();
             }
         }
         const Real count = Real(m_firstMember[c + 1] - m_firstMember[c]);
-        row.block[13] += identityPart(count, arms, second);
+        diagonal += identityPart(count, arms, second);
         // A lone particle has no rotations, particles on a line none about it: a floor far below round-off of the
         // rest keeps E definite. Those modes neither take part of r (Z^T r) nor give velocity (Z y), so the floor
         // changes nothing else.
-        row.block[13].bottomRightCorner<3, 3>().diagonal().array() += 1e-12 * row.block[13].trace();
-        for (int s = 0; s < 27; ++s)
-            if (row.neighbour[s] != kNone && row.neighbour[s] >= c) rows[c].emplace_back(row.neighbour[s], row.block[s]);
+        diagonal.bottomRightCorner<3, 3>().diagonal().array() += 1e-12 * diagonal.trace();
+        // Only the lower triangle is kept: the blocks with clusters of a higher index.
+        rows[c].emplace_back(std::uint32_t(c), diagonal);
+        for (const auto& entry : offDiagonal)
+            if (entry.first > c) rows[c].push_back(entry);
         std::sort(rows[c].begin(), rows[c].end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     });
 
@@ -218,6 +212,7 @@ void ClusterModes::build(const std::vector<Vec3>& x, Real cellSize, std::size_t 
 }
 
 void ClusterModes::addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const {
+    if (clusters() == 0) return;
     forEachParticle(clusters(), [&](std::size_t c) {
         Vec6 y = Vec6::Zero();
         for (std::uint32_t k = m_firstMember[c]; k < m_firstMember[c + 1]; ++k) {
@@ -229,6 +224,7 @@ void ClusterModes::addCorrection(const std::vector<Vec3>& x, const std::vector<V
     const Eigen::Matrix<Real, Eigen::Dynamic, 1> motion = m_factor.solve(m_rhs);
     forEachParticle(x.size(), [&](std::size_t i) {
         const std::size_t c = m_of[i];
+        if (c == kNone) return;
         const Vec6 y = motion.segment<6>(Eigen::Index(6 * c));
         z[i] += y.head<3>() + y.tail<3>().cross(arm(c, x[i]));
     });

@@ -39,19 +39,23 @@ private:
     Mat6 m_inverse = Mat6::Zero();
 };
 
-/// The rigid motions of each cluster of fluid particles, the clusters being the cells of a grid of side at least
-/// the kernel support (so two particles that interact lie in the same or in adjacent cells). The coarse system
-/// E = Z^T M Z has a 6x6 block per pair of adjacent clusters; it is assembled from the pairs that cross clusters
-/// (pairs within one cluster do not act on its rigid motions) and factored by sparse Cholesky.
+/// The rigid motions of each cluster of fluid particles, the clusters being the cells of a grid (split by group where
+/// groups are given). The coarse system E = Z^T M Z has a 6x6 block per pair of adjacent clusters; it is assembled
+/// from the pairs that cross clusters (pairs within one cluster do not act on its rigid motions) and factored by
+/// sparse Cholesky.
 class ClusterModes {
 public:
-    /// Clusters are the cells of side cellSize (at least the kernel support), larger where that would make more than
-    /// maxClusters. The system (I - dt A): fluid pairs with Eq. 7's coefficient k_ij in the order of the neighbour
-    /// lists (the off-diagonal block of pair ij is dt k_ij x_ij x_ij^T), and the boundary part of each particle's
-    /// diagonal block (null: none; withExtra: the particles where it is not zero).
-    void build(const std::vector<Vec3>& x, Real cellSize, std::size_t maxClusters, const NeighbourList& fluid,
-               const std::vector<Real>& pairs, Real dt, const std::vector<Mat3>* extra,
-               const std::vector<std::uint32_t>& withExtra);
+    /// A group that keeps its particles out of every cluster (their rows of Z are zero).
+    static constexpr std::uint8_t kNoCluster = 255;
+
+    /// Clusters are the cells of side cellSize, larger where that would make more than maxClusters; particles of
+    /// different groups (null: one group) never share a cluster. The system (I - dt A): fluid pairs with Eq. 7's
+    /// coefficient k_ij in the order of the neighbour lists (the off-diagonal block of pair ij is dt k_ij x_ij x_ij^T),
+    /// and the boundary part of each particle's diagonal block (null: none; withExtra: the particles where it is not
+    /// zero).
+    void build(const std::vector<Vec3>& x, const std::vector<std::uint8_t>* group, Real cellSize,
+               std::size_t maxClusters, const NeighbourList& fluid, const std::vector<Real>& pairs, Real dt,
+               const std::vector<Mat3>* extra, const std::vector<std::uint32_t>& withExtra);
     /// z += Z E^-1 Z^T r: the exact answer within the clusters' rigid motions.
     void addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const;
     std::size_t clusters() const { return m_centre.size(); }
@@ -60,10 +64,10 @@ private:
     Vec3 arm(std::size_t c, const Vec3& xi) const { return (xi - m_centre[c]) / m_scale; }
 
     Real m_scale = 1;
-    std::vector<std::uint32_t> m_of;                      // each particle's cluster
+    static constexpr std::uint32_t kNone = ~std::uint32_t(0);
+    std::vector<std::uint32_t> m_of;                      // each particle's cluster, or kNone
     std::vector<std::uint32_t> m_members, m_firstMember;  // the particles of cluster c, ascending
     std::vector<Vec3> m_centre;
-    std::vector<std::int64_t> m_cell;                     // each cluster's grid cell, packed
     Eigen::SimplicialLDLT<Eigen::SparseMatrix<Real>> m_factor;
     mutable Eigen::Matrix<Real, Eigen::Dynamic, 1> m_rhs;
 };

@@ -52,6 +52,8 @@ public:
     /// Recomputes each particle's viscosity from its source and temperature; nothing when it is one value.
     void refresh(const ParticleSet& particles);
     Real operator()(std::size_t i) const { return m_perParticle ? (*m_perParticle)[i] : m_mu; }
+    /// Whether particles differ in viscosity.
+    bool varies() const { return m_perParticle != nullptr; }
 
 private:
     Real m_mu = 0;

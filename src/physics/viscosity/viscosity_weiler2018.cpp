@@ -3,18 +3,26 @@
 #include "core/parallel.h"
 #include "physics/pair_sweeps.h"
 
+#include <algorithm>
+#include <cmath>
+
 namespace ganache {
 
 namespace {
 
 constexpr Real kTwoDPlus4 = 10;  // 2 (d + 2) with d = 3
-// The side of a cluster of the coarse space in kernel supports, about 6^3 = 216 particles (support 4 r, spacing
-// 2 r). Measured on a 43k-particle chocolate bunny (5e6 Pa s): 2 supports cut CG to 21 iterations a solve but
-// factoring the coarse system cost more than it saved; 3: 28 iterations and half the viscosity time of the
-// fluid-wide rigid modes (94 iterations); 4: 34.
-constexpr Real kClusterSize = 3;
-// At most this many clusters (24,576 unknowns): above it the sparse factorisation would outgrow the CG iterations.
-constexpr std::size_t kMaxClusters = 4096;
+// The coarse space's clusters: cells of two kernel supports (about 4^3 = 64 particles at support 4 r, spacing 2 r),
+// larger where that would make more than 6 n^0.4 clusters. Factoring the coarse system grows faster than the fine
+// products (measured: 2 ms for 120 clusters, 200 ms for 750), so the cap keeps it to a few CG iterations' worth:
+// 43k particles of chocolate, 360 clusters, 29 CG iterations a solve (cells of two supports: 23.5 iterations but 200
+// ms a factorisation; the fluid-wide rigid modes: 94). Cells of three supports left some melting steps of the
+// default scene at the 100-iteration cap; two left none.
+constexpr Real kClusterSize = 2;
+std::size_t maxClusters(std::size_t particles) {
+    return std::size_t(std::clamp(6 * std::pow(Real(particles), 0.4), 64.0, 4096.0));
+}
+// Below this stiffness (dt A against the identity) block Jacobi alone does well: such particles join no cluster.
+constexpr Real kStiff = 1;
 
 }  // namespace
 
@@ -74,9 +82,19 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
             if (ctx.boundaryNeighbours.first(i) != ctx.boundaryNeighbours.last(i)) m_nearBoundary.push_back(std::uint32_t(i));
     m_rigid.build(x, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary, ctx.kernel.supportRadius());
     using P = ViscosityParams::Preconditioner;
-    if (m_params.preconditioner == P::Clusters)
-        m_clusters.build(x, kClusterSize * ctx.kernel.supportRadius(), kMaxClusters, ctx.fluidNeighbours, pairs(), dt,
-                         sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary);
+    if (m_params.preconditioner == P::Clusters) {
+        // Only stiff particles join clusters: where dt A is small against the identity, block Jacobi alone does
+        // well. Where viscosities differ (melting), a cluster holds one decade of them: a rigid motion of solid and
+        // molten particles together is no slow mode of the system, and such clusters left CG at its cap.
+        m_group.resize(n);
+        forEachParticle(n, [&](std::size_t i) {
+            const Real stiffness = -dt * fluidBlock(i).trace() / 3;
+            m_group[i] = stiffness < kStiff ? ClusterModes::kNoCluster
+                         : m_mu.varies()    ? std::uint8_t(std::min(std::floor(std::log10(std::max(m_mu(i), Real(1)))), 254.0))
+                                            : std::uint8_t(0);
+        });
+        m_clusters.build(x, &m_group, kClusterSize * ctx.kernel.supportRadius(), maxClusters(n), ctx.fluidNeighbours, pairs(), dt, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary);
+    }
     // z = P r: the block diagonal, plus (two-level) the exact answer within the rigid motions of the fluid or of
     // its clusters, which the block diagonal of a stiff fluid barely moves (their eigenvalue is 1 against up to
     // dt mu / (rho h^2) for the rest).

@@ -35,6 +35,7 @@ private:
     std::vector<Vec3> m_start, m_guess;         // M v and M out before CG
     RigidModes m_rigid;
     ClusterModes m_clusters;
+    std::vector<std::uint8_t> m_group;  // each particle's group of clusters (see solve())
 };
 
 }  // namespace ganache
