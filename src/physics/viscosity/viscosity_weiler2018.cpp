@@ -21,8 +21,12 @@ constexpr Real kClusterSize = 2;
 std::size_t maxClusters(std::size_t particles) {
     return std::size_t(std::clamp(6 * std::pow(Real(particles), 0.4), 64.0, 4096.0));
 }
-// Below this stiffness (dt A against the identity) block Jacobi alone does well: such particles join no cluster.
-constexpr Real kStiff = 1;
+// The stiffness (dt A against the identity, about dt mu / (rho h^2)) from which a particle joins a cluster; below it
+// the fluid-wide rigid motions serve. Clusters pay where the solve struggles: the default scene's chocolate (stiffness
+// 30 molten to 7e6 solid) converges with them and stops at the cap 222 times without, 64 times when only particles
+// above 1e4 join; on the 1,000 Pa s block of the anchors (about 150) they halve the iterations but cost 10 % more
+// time.
+constexpr Real kStiff = 300;
 
 }  // namespace
 
@@ -82,30 +86,34 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
             if (ctx.boundaryNeighbours.first(i) != ctx.boundaryNeighbours.last(i)) m_nearBoundary.push_back(std::uint32_t(i));
     m_rigid.build(x, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary, ctx.kernel.supportRadius());
     using P = ViscosityParams::Preconditioner;
+    bool clusters = false;
     if (m_params.preconditioner == P::Clusters) {
-        // Only stiff particles join clusters: where dt A is small against the identity, block Jacobi alone does
-        // well. Where viscosities differ (melting), a cluster holds one decade of them: a rigid motion of solid and
-        // molten particles together is no slow mode of the system, and such clusters left CG at its cap.
+        // Only stiff particles join clusters. Where viscosities differ (melting), a cluster holds one decade of them:
+        // a rigid motion of solid and molten particles together is no slow mode of the system, and such clusters
+        // left CG at its cap.
         m_group.resize(n);
         forEachParticle(n, [&](std::size_t i) {
             const Real stiffness = -dt * fluidBlock(i).trace() / 3;
             m_group[i] = stiffness < kStiff ? ClusterModes::kNoCluster
-                         : m_mu.varies()    ? std::uint8_t(std::min(std::floor(std::log10(std::max(m_mu(i), Real(1)))), 254.0))
-                                            : std::uint8_t(0);
+                         : m_mu.varies()
+                             ? std::uint8_t(std::min(std::floor(std::log10(std::max(m_mu(i), Real(1)))), 254.0))
+                             : std::uint8_t(0);
         });
-        m_clusters.build(x, &m_group, kClusterSize * ctx.kernel.supportRadius(), maxClusters(n), ctx.fluidNeighbours, pairs(), dt, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary);
+        m_clusters.build(x, &m_group, kClusterSize * ctx.kernel.supportRadius(), maxClusters(n), ctx.fluidNeighbours,
+                         pairs(), dt, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary);
+        clusters = m_clusters.clusters() > 0;
     }
-    // z = P r: the block diagonal, plus (two-level) the exact answer within the rigid motions of the fluid or of
-    // its clusters, which the block diagonal of a stiff fluid barely moves (their eigenvalue is 1 against up to
-    // dt mu / (rho h^2) for the rest).
+    // z = P r: the block diagonal, plus (two-level) the exact answer within the rigid motions of its clusters or,
+    // without clusters, of the whole fluid, which the block diagonal of a stiff fluid barely moves (their
+    // eigenvalue is 1 against up to dt mu / (rho h^2) for the rest).
+    const bool wholeFluid = m_params.preconditioner == P::Rigid || (m_params.preconditioner == P::Clusters && !clusters);
     auto precondition = [&](const std::vector<Vec3>& r, std::vector<Vec3>& z) {
-        const bool rigid = m_params.preconditioner == P::Rigid;
-        const Vec6 coarse = rigid ? Vec6(m_rigid.solve(m_rigid.project(x, r))) : Vec6::Zero();
+        const Vec6 coarse = wholeFluid ? Vec6(m_rigid.solve(m_rigid.project(x, r))) : Vec6::Zero();
         forEachParticle(n, [&](std::size_t i) {
             z[i] = m_inverseDiagonal[i] * r[i];
-            if (rigid) z[i] += m_rigid.velocity(coarse, x[i]);
+            if (wholeFluid) z[i] += m_rigid.velocity(coarse, x[i]);
         });
-        if (m_params.preconditioner == P::Clusters) m_clusters.addCorrection(x, r, z);
+        if (clusters) m_clusters.addCorrection(x, r, z);
     };
 
     const auto system = [&](const std::vector<Vec3>& in, std::vector<Vec3>& result) {
