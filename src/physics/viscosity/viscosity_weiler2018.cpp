@@ -99,9 +99,11 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
                              ? std::uint8_t(std::min(std::floor(std::log10(std::max(m_mu(i), Real(1)))), 254.0))
                              : std::uint8_t(0);
         });
-        m_clusters.build(x, &m_group, kClusterSize * ctx.kernel.supportRadius(), maxClusters(n), ctx.fluidNeighbours,
-                         pairs(), dt, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary);
-        clusters = m_clusters.clusters() > 0;
+        if (std::any_of(m_group.begin(), m_group.end(), [](std::uint8_t g) { return g != ClusterModes::kNoCluster; })) {
+            m_clusters.build(x, &m_group, kClusterSize * ctx.kernel.supportRadius(), maxClusters(n),
+                             ctx.fluidNeighbours, pairs(), dt, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary);
+            clusters = m_clusters.clusters() > 0;
+        }
     }
     // z = P r: the block diagonal, plus (two-level) the exact answer within the rigid motions of its clusters or,
     // without clusters, of the whole fluid, which the block diagonal of a stiff fluid barely moves (their
