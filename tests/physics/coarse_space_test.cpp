@@ -48,6 +48,16 @@ struct PairSystem {
     static constexpr Real kSupport = 2.1;
 };
 
+/// max_i |a_i - b_i| relative to max_i |b_i|.
+Real largestDifference(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
+    Real worst = 0, scale = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+        worst = std::max(worst, (a[i] - b[i]).norm());
+        scale = std::max(scale, b[i].norm());
+    }
+    return worst / scale;
+}
+
 }  // namespace
 
 TEST(ClusterModes, RecoversAnyRigidMotionOfTheClusters) {
@@ -89,12 +99,7 @@ TEST(ClusterModes, RecoversAnyRigidMotionOfTheClusters) {
         }
         std::vector<Vec3> z(s.x.size(), Vec3::Zero());
         modes.addCorrection(s.x, s.multiply(zy), z);
-        Real worst = 0, scale = 0;
-        for (std::size_t i = 0; i < s.x.size(); ++i) {
-            worst = std::max(worst, (z[i] - zy[i]).norm());
-            scale = std::max(scale, zy[i].norm());
-        }
-        EXPECT_LT(worst, 1e-9 * scale) << (!group ? "one group" : group == &alternate ? "two groups" : "some outside");
+        EXPECT_LT(largestDifference(z, zy), 1e-9) << (!group ? "one group" : group == &alternate ? "two groups" : "some outside");
     }
 }
 
@@ -110,10 +115,5 @@ TEST(ClusterModes, FewerLargerClustersStillHoldTheWholeFluidsRigidMotion) {
     for (std::size_t i = 0; i < s.x.size(); ++i) motion[i] = Vec3(0.3, -1, 2) + Vec3(1, 0.5, -0.2).cross(s.x[i]);
     std::vector<Vec3> z(s.x.size(), Vec3::Zero());
     modes.addCorrection(s.x, s.multiply(motion), z);
-    Real worst = 0, scale = 0;
-    for (std::size_t i = 0; i < s.x.size(); ++i) {
-        worst = std::max(worst, (z[i] - motion[i]).norm());
-        scale = std::max(scale, motion[i].norm());
-    }
-    EXPECT_LT(worst, 1e-9 * scale);
+    EXPECT_LT(largestDifference(z, motion), 1e-9);
 }
