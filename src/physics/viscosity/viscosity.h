@@ -26,9 +26,10 @@ struct ViscosityParams : EffectParams {
     Real boundaryMu = 0;         ///< boundary viscosity mu_b [Pa s]: 0 slips, large sticks
     /// CG stops when |r| <= tolerance |b - (I - dt A) v|, the residual relative to the correction the solve has to
     /// make. The rigid motions are solved exactly after CG, so the tolerance no longer decides what happens to
-    /// momentum or spin, but it does decide how stiff a stiff fluid stays: a 5e6 Pa s body on a slipping floor kept
-    /// parts moving at 1.4 cm/s at 1e-4, 10 cm/s at 1e-3 (the non-rigid, smooth modes that block Jacobi barely
-    /// reaches). Looser settings are as accurate for runny fluids at a third of the iterations (ganache study).
+    /// momentum or spin, but it does decide how stiff a stiff fluid stays: with the fluid-wide rigid motions alone a
+    /// 5e6 Pa s body on a slipping floor kept parts moving at 1.4 cm/s at 1e-4, 10 cm/s at 1e-3 (with the clusters,
+    /// 1 cm/s at 1e-3), and a viscous column at rest needs 1e-4 to settle below the DFSPH tolerance. Looser settings
+    /// are as accurate for runny fluids at a third of the iterations (ganache study, the anchors).
     Real tolerance = 1e-4;
     std::int64_t maxIterations = 100;  ///< CG iterations per solve; explicit: sub-steps per step (default 10,000)
     /// none, 3x3 block Jacobi, or block Jacobi plus a coarse space (two-level, weiler2018 only): the rigid motions of
