@@ -27,16 +27,26 @@ void forEachBlock(std::size_t n, F&& f, std::size_t grain = 512) {
                       [&](const auto& r) { f(r.begin(), r.end()); });
 }
 
-/// sum_i term(i), deterministic for any thread count; T is any type with + and a zero (Real, Eigen vectors).
-template <class T = Real, class Term>
-T deterministicSum(std::size_t n, Term&& term, T zero = T(0)) {
+/// sum over fixed blocks [begin, end) of [0, n) of f(begin, end), deterministic for any thread count (the blocks and
+/// the order their sums combine in do not depend on it); f may write the slots of its block, so a loop that updates
+/// vectors also returns their dot products without a second pass.
+template <class T = Real, class F>
+T deterministicBlockSum(std::size_t n, F&& f, T zero = T(0)) {
     return tbb::parallel_deterministic_reduce(
         tbb::blocked_range<std::size_t>(0, n, 2048), zero,
-        [&](const auto& r, T s) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) s += term(i);
-            return s;
-        },
+        [&](const auto& r, T s) { return T(s + f(r.begin(), r.end())); },
         [](const T& a, const T& b) -> T { return a + b; });
+}
+
+/// sum_i term(i), deterministic for any thread count; T is any type with + and a zero (Real, Eigen vectors). term may
+/// write particle i's slots.
+template <class T = Real, class Term>
+T deterministicSum(std::size_t n, Term&& term, T zero = T(0)) {
+    return deterministicBlockSum<T>(n, [&](std::size_t begin, std::size_t end) {
+        T s = zero;
+        for (std::size_t i = begin; i != end; ++i) s += term(i);
+        return s;
+    }, zero);
 }
 
 }  // namespace ganache

@@ -43,34 +43,34 @@ ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& preco
                                        std::size_t maxIterations) {
     const std::size_t n = b.size();
     for (auto* a : {&r, &z, &p, &q}) a->resize(n);
-    forEachParticle(n, [&](std::size_t i) { r[i] = b[i] - mv[i]; }, 4096);
-    scale = std::sqrt(fieldDot(r, r));
+    scale = std::sqrt(deterministicSum(n, [&](std::size_t i) { return (b[i] - mv[i]).squaredNorm(); }));
     if (scale == 0) {
         std::copy(v.begin(), v.end(), x.begin());
         return {};
     }
-    forEachParticle(n, [&](std::size_t i) { r[i] = b[i] - mx[i]; }, 4096);
-    precondition(r, z);
-    std::copy(z.begin(), z.end(), p.begin());
-    Real rz = fieldDot(r, z);
+    const Real rr = deterministicSum(n, [&](std::size_t i) {
+        r[i] = b[i] - mx[i];
+        return r[i].squaredNorm();
+    });
     ViscosityPass pass;
-    pass.residual = std::sqrt(fieldDot(r, r)) / scale;
-    while (pass.residual > tolerance && pass.iterations < maxIterations) {
-        multiply(p, q);
-        const Real alpha = rz / fieldDot(p, q);
-        forEachParticle(n, [&](std::size_t i) {
+    pass.residual = std::sqrt(rr) / scale;
+    if (pass.residual <= tolerance || maxIterations == 0) return pass;
+    Real rz = precondition(r, z);
+    std::copy(z.begin(), z.end(), p.begin());
+    for (;;) {
+        const Real alpha = rz / multiply(p, q);
+        const Real rrNext = deterministicSum(n, [&](std::size_t i) {
             x[i] += alpha * p[i];
             r[i] -= alpha * q[i];
-        }, 4096);
-        precondition(r, z);
-        const Real rzNext = fieldDot(r, z);
+            return r[i].squaredNorm();
+        });
+        pass.residual = std::sqrt(rrNext) / scale;
+        if (++pass.iterations >= maxIterations || pass.residual <= tolerance) return pass;
+        const Real rzNext = precondition(r, z);
         const Real beta = rzNext / rz;
         rz = rzNext;
         forEachParticle(n, [&](std::size_t i) { p[i] = z[i] + beta * p[i]; }, 4096);
-        pass.residual = std::sqrt(fieldDot(r, r)) / scale;
-        ++pass.iterations;
     }
-    return pass;
 }
 
 ParticleViscosity::ParticleViscosity(const ViscosityParams& params, const SimulationSetup& setup,

@@ -73,9 +73,11 @@ struct ViscosityPass {
 Real fieldDot(const std::vector<Vec3>& a, const std::vector<Vec3>& b);
 
 /// Preconditioned conjugate gradients for a symmetric positive definite system M x = b, with M and the
-/// preconditioner P given as functions (out = M in, z = P r) and the vectors kept between solves.
+/// preconditioner P given as functions and the vectors kept between solves. Each function also returns the dot
+/// product of its input and output, which it can take in the same pass (deterministically: see fieldDot).
 struct ConjugateGradient {
-    using Apply = std::function<void(const std::vector<Vec3>& in, std::vector<Vec3>& out)>;
+    /// out = M in (or z = P r); returns in . out.
+    using Apply = std::function<Real(const std::vector<Vec3>& in, std::vector<Vec3>& out)>;
     std::vector<Vec3> r, z, p, q;
     Real scale = 0;  ///< |b - M v| of the last solve: the correction the solve had to make
     /// `x` holds the initial guess; iterates until |r| <= tolerance |b - M v| (the residual relative to the

@@ -73,9 +73,13 @@ ViscosityPass ViscosityTakahashi2015::solve(StepContext& ctx, const ParticleSet&
     });
     const auto system = [&](const std::vector<Vec3>& in, std::vector<Vec3>& result) {
         multiply(ctx, particles, in, result);
+        return fieldDot(in, result);
     };
     const auto precondition = [&](const std::vector<Vec3>& r, std::vector<Vec3>& z) {
-        forEachParticle(n, [&](std::size_t i) { z[i] = m_inverseDiagonal[i] * r[i]; });
+        return deterministicSum(n, [&](std::size_t i) {
+            z[i] = m_inverseDiagonal[i] * r[i];
+            return r[i].dot(z[i]);
+        });
     };
     // As in the main solver, the tolerance is relative to the correction the solve has to make.
     return m_cg.solve(system, precondition, m_b, v, out, m_params.tolerance, std::size_t(m_params.maxIterations));

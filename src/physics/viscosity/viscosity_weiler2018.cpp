@@ -47,13 +47,16 @@ std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vect
     return lap;
 }
 
-void ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
+Real ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                                    std::vector<Vec3>& out) const {
     // (I - dt A) in, with the bodies' velocities on the right-hand side
-    forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
+    return deterministicBlockSum(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::viscousProduct(begin, end, {&ctx.fluidNeighbours, pairs().data()},
                                {&ctx.boundaryNeighbours, sticky() ? boundaryPairs().data() : nullptr},
                                particles.x().data(), ctx.boundary.x.data(), in.data(), ctx.dt, out.data());
+        Real s = 0;
+        for (std::size_t i = begin; i < end; ++i) s += in[i].dot(out[i]);
+        return s;
     });
 }
 
@@ -111,15 +114,18 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     const bool wholeFluid = m_params.preconditioner == P::Rigid || (m_params.preconditioner == P::Clusters && !clusters);
     auto precondition = [&](const std::vector<Vec3>& r, std::vector<Vec3>& z) {
         const Vec6 coarse = wholeFluid ? Vec6(m_rigid.solve(m_rigid.project(x, r))) : Vec6::Zero();
-        forEachParticle(n, [&](std::size_t i) {
+        const Real rz = deterministicSum(n, [&](std::size_t i) {
             z[i] = m_inverseDiagonal[i] * r[i];
             if (wholeFluid) z[i] += m_rigid.velocity(coarse, x[i]);
+            return r[i].dot(z[i]);
         });
-        if (clusters) m_clusters.addCorrection(x, r, z);
+        if (!clusters) return rz;
+        m_clusters.addCorrection(x, r, z);
+        return fieldDot(r, z);
     };
 
     const auto system = [&](const std::vector<Vec3>& in, std::vector<Vec3>& result) {
-        multiply(ctx, particles, in, result);
+        return multiply(ctx, particles, in, result);
     };
     // The correction the solve has to make, b - M v, and the warm start's residual b - M out, from one sweep.
     m_start.resize(n);

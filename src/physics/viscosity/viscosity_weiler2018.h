@@ -24,7 +24,8 @@ protected:
     ViscosityPass solve(StepContext& ctx, const ParticleSet& particles, std::vector<Vec3>& out) override;
 
 private:
-    void multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
+    /// out = (I - dt A) in; returns in . out.
+    Real multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out) const;
 
     std::vector<Vec3> m_b;
