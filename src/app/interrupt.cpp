@@ -2,6 +2,8 @@
 
 #include <csignal>
 
+#include <unistd.h>
+
 namespace ganache {
 
 namespace {
@@ -10,7 +12,13 @@ volatile std::sig_atomic_t g_received = 0;
 struct sigaction g_previous[2];
 constexpr int kSignals[2] = {SIGINT, SIGTERM};
 
-extern "C" void onSignal(int signal) { g_received = signal; }
+extern "C" void onSignal(int signal) {
+    g_received = signal;
+    // Only async-signal-safe calls here: one write of a fixed text.
+    static const char kNote[] = "\nganache: stopping at the next safe point (a step or a frame); signal again to "
+                                "stop at once\n";
+    [[maybe_unused]] const ssize_t written = write(STDERR_FILENO, kNote, sizeof(kNote) - 1);
+}
 
 }  // namespace
 

@@ -1,6 +1,7 @@
 // ganache: the command line. Parses arguments, calls the pipeline, maps errors to exit codes:
 // 0 success, 2 bad input, 1 run-time failure, 130 / 143 stopped by SIGINT / SIGTERM (after a checkpoint).
 
+#include "app/interrupt.h"
 #include "core/errors.h"
 #include "pipeline/pipeline.h"
 #include "tools/study/study.h"
@@ -8,6 +9,7 @@
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
+#include <cmath>
 #include <cstdio>
 
 int main(int argc, char** argv) {
@@ -66,7 +68,14 @@ int main(int argc, char** argv) {
         subs[i]->add_option("--memory", opt.memoryGiB,
                             "GiB the run may plan for (default: 80 % of what the machine, or its cgroup, has "
                             "free); the surface stage runs frames in parallel as far as it allows")
-            ->check(CLI::PositiveNumber);
+            ->check(CLI::Validator(
+                [](std::string& text) {
+                    double v = 0;
+                    return CLI::detail::lexical_cast(text, v) && v > 0 && std::isfinite(v)
+                               ? std::string()
+                               : fmt::format("must be a number of GiB above 0 (got '{}')", text);
+                },
+                "GiB > 0"));
     }
     bool check = false;
     subs[1]->add_flag("--check", check,
@@ -100,6 +109,8 @@ int main(int argc, char** argv) {
             return 0;
         }
         if (studyCmd->parsed()) {
+            const InterruptGuard guard;
+            study.stopSignal = [] { return InterruptGuard::received(); };
             studyCommand(study);
             return 0;
         }

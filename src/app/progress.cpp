@@ -36,16 +36,16 @@ void Progress::update(std::size_t done) {
     print(done, false);
 }
 
-void Progress::finish() {
+void Progress::finish(std::size_t done) {
     if (m_finished) return;
-    print(m_total, true);
+    print(std::min(done, m_total), true);
     m_finished = true;
 }
 
 void Progress::print(std::size_t done, bool final) {
     const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - m_start).count();
     const double fraction = std::min(1.0, double(done) / double(m_total));
-    const std::string eta = final ? "done in " + formatDuration(elapsed)
+    const std::string eta = final ? (done < m_total ? "stopped after " : "done in ") + formatDuration(elapsed)
                             : fraction > 0 ? "ETA " + formatDuration(elapsed * (1 - fraction) / fraction)
                                            : "ETA --";
     if (m_isTerminal) {

@@ -13,8 +13,8 @@ public:
     ~Progress();
     /// Reports that `done` of the total units are finished.
     void update(std::size_t done);
-    /// Prints the final state (100 % and the elapsed time).
-    void finish();
+    /// Prints the final state: `done` units (default: all of them) and the elapsed time.
+    void finish(std::size_t done = std::size_t(-1));
 
 private:
     void print(std::size_t done, bool final);

@@ -113,6 +113,7 @@ std::string RunReport::json() const {
     json j;
     j["ganache_version"] = GANACHE_VERSION;
     j["scene"] = {{"name", m_scene.name}, {"file", m_scene.file.string()}, {"hash_fnv1a64", m_scene.hash}};
+    j["result"] = {{"status", m_status}, {"error", m_why}};
     j["quality"] = m_scene.quality.str();
     j["particle_radius_m"] = m_scene.particleRadius;
     j["threads"] = m_threads;

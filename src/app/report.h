@@ -35,6 +35,8 @@ public:
     void setCounts(std::size_t fluid, std::size_t boundary);
     void setFrames(std::int64_t first, std::int64_t last) { m_firstFrame = first, m_lastFrame = last; }
     void addWarning(const std::string& text) { m_warnings.push_back(text); }
+    /// How the run ended: "done", "failed" or "interrupted", and why (empty when done). report.json's `result`.
+    void setOutcome(std::string status, std::string why) { m_status = std::move(status), m_why = std::move(why); }
     /// What the simulate stage did: steps, time, the effects that ran with their times and counters, solver
     /// statistics and warnings.
     void setSimulation(const SolverStats& stats, double simulatedTime, const std::vector<EffectSummary>& effects,
@@ -62,6 +64,7 @@ private:
     std::size_t m_fluid = 0, m_boundary = 0;
     std::int64_t m_firstFrame = 0, m_lastFrame = -1;
     std::vector<std::string> m_warnings;
+    std::string m_status = "running", m_why;
     std::unique_ptr<Data> m_data;
 };
 

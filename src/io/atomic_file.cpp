@@ -1,5 +1,7 @@
 #include "io/atomic_file.h"
 
+#include "core/errors.h"
+
 #include <fmt/format.h>
 
 #include <atomic>
@@ -166,6 +168,23 @@ std::size_t removeStaleTemporaries(const fs::path& folder) {
         }
     }
     return removed;
+}
+
+void prepareOutputFolder(const std::filesystem::path& root, const std::string& option) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    for (fs::path p = root; !p.empty(); p = p.parent_path()) {
+        if (fs::exists(p, ec) && !fs::is_directory(p, ec))
+            throw InputError(fmt::format("{} {}: {} is a file, not a folder\n  fix: give {} a folder (it is made "
+                                         "when missing) that no file stands in the way of",
+                                         option, root.string(), p.string(), option));
+        if (p == p.parent_path()) break;
+    }
+    fs::create_directories(root, ec);
+    if (ec)
+        throw InputError(fmt::format("{} {}: the folder cannot be made: {}\n  fix: choose a folder this user may "
+                                     "write to",
+                                     option, root.string(), ec.message()));
 }
 
 }  // namespace ganache

@@ -28,4 +28,9 @@ inline void writeTextAtomically(const std::filesystem::path& path, const std::st
 /// writeAtomically whose process is gone. Returns how many were removed.
 std::size_t removeStaleTemporaries(const std::filesystem::path& folder);
 
+/// Makes the output folder `root` (named by `option` in messages, e.g. "--out") before any work, or throws
+/// InputError: a part of the path that exists is a file, or the folder cannot be made. A typo in an output path
+/// then never costs a stage's work.
+void prepareOutputFolder(const std::filesystem::path& root, const std::string& option);
+
 }  // namespace ganache

@@ -48,7 +48,8 @@ BodyMotion readMotion(Section m) {
     if (auto rot = m.child("rotation")) {
         mo.axis = rot->direction("axis", mo.axis);
         mo.centre = rot->vec3("centre", mo.centre, "m");
-        mo.angularVelocity = rot->number("angular_velocity", std::nullopt, "rad/s");
+        mo.angularVelocity = rot->number("angular_velocity", std::nullopt, "rad/s",
+                                         Bounds::closed(-limits::kAngularVelocity, limits::kAngularVelocity));
         rot->rejectUnused();
     }
     for (Section& k : m.list("keyframes")) {
@@ -57,7 +58,15 @@ BodyMotion readMotion(Section m) {
             k.fail("time", fmt::format("{}.time ({} s) must come after the previous keyframe ({} s)", k.path(),
                                        formatNumber(t), formatNumber(mo.keyframes.back().first)),
                    "list keyframes in increasing time");
-        mo.keyframes.emplace_back(t, k.vec3("offset", std::nullopt, "m"));
+        const Vec3 offset = k.vec3("offset", std::nullopt, "m", limits::kCoordinate);
+        if (!mo.keyframes.empty()) {
+            const Real speed = (offset - mo.keyframes.back().second).norm() / (t - mo.keyframes.back().first);
+            if (!(speed <= limits::kSpeed))
+                k.fail("offset", fmt::format("{}.offset moves the body at {:.3g} m/s since the previous keyframe, above "
+                                             "the {} m/s a scene may use", k.path(), speed, formatNumber(limits::kSpeed)),
+                       "space the keyframes further apart in time, or shorten the move");
+        }
+        mo.keyframes.emplace_back(t, offset);
         k.rejectUnused();
     }
     m.rejectUnused();

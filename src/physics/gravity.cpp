@@ -25,7 +25,7 @@ private:
 
 std::shared_ptr<const EffectParams> readGravity(Section& s) {
     auto p = std::make_shared<GravityParams>();
-    p->acceleration = s.vec3("acceleration", p->acceleration, "m/s^2");
+    p->acceleration = s.vec3("acceleration", p->acceleration, "m/s^2", limits::kAcceleration);
     return p;
 }
 

@@ -98,11 +98,12 @@ ViscosityLaw readViscosityLaw(Section s) {
     ViscosityLaw law;
     if (s.exactlyOne({"reynolds", "ramp"}, "viscosity law", "e.g. `reynolds: {mu0: 5.0e6, alpha: 0.35}`") == "reynolds") {
         Section r = *s.child("reynolds");
-        law.mu0 = r.positive("mu0", std::nullopt, "Pa s");
+        law.mu0 = r.number("mu0", std::nullopt, "Pa s", Bounds{0, limits::kViscosity, true, false});
         law.t0 = r.number("t0", law.t0, "C");
         law.alpha = r.number("alpha", std::nullopt, "1/K");
-        law.muMin = r.positive("min", law.mu0 * 1e-6, "Pa s");
-        law.muMax = r.positive("max", law.mu0 * 1e6, "Pa s");
+        law.muMin = r.number("min", law.mu0 * 1e-6, "Pa s", Bounds{0, limits::kViscosity, true, false});
+        law.muMax = r.number("max", std::min(law.mu0 * 1e6, limits::kViscosity), "Pa s",
+                               Bounds{0, limits::kViscosity, true, false});
         if (law.muMax < law.muMin)
             r.fail("max", fmt::format("{}.max ({} Pa s) is below min ({} Pa s)", r.path(), formatNumber(law.muMax),
                                       formatNumber(law.muMin)),
@@ -116,7 +117,7 @@ ViscosityLaw readViscosityLaw(Section s) {
                 p.fail("temperature", fmt::format("{}.temperature ({} C) must be above the previous point's ({} C)",
                                                   p.path(), formatNumber(t), formatNumber(law.ramp.back().first)),
                        "list the ramp in increasing temperature");
-            law.ramp.emplace_back(t, p.positive("mu", std::nullopt, "Pa s"));
+            law.ramp.emplace_back(t, p.number("mu", std::nullopt, "Pa s", Bounds{0, limits::kViscosity, true, false}));
             p.rejectUnused();
         }
         if (law.ramp.empty())
@@ -139,8 +140,8 @@ std::vector<Material> readMaterials(std::optional<Section> section) {
         const std::string base = m.choice("base", "water", presetNames());
         Material mat = *findPreset(base);
         mat.name = key;
-        mat.density = m.positive("density", mat.density, "kg/m^3");
-        mat.mu = m.number("mu", mat.mu, "Pa s", Bounds::nonNegative());
+        mat.density = m.number("density", mat.density, "kg/m^3", Bounds::closed(1, limits::kDensity));
+        mat.mu = m.number("mu", mat.mu, "Pa s", Bounds::closed(0, limits::kViscosity));
         mat.conductivity = m.number("conductivity", mat.conductivity, "W/(m K)", Bounds::nonNegative());
         mat.heatCapacity = m.positive("heat_capacity", mat.heatCapacity, "J/(kg K)");
         if (auto law = m.child("viscosity_law")) mat.law = readViscosityLaw(*law);

@@ -1,5 +1,6 @@
 #include "pipeline/frame_stage.h"
 
+#include "app/interrupt.h"
 #include "core/errors.h"
 #include "pipeline/pipeline.h"
 
@@ -7,6 +8,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cstring>
 
 namespace ganache {
 
@@ -22,6 +24,7 @@ FrameJobs::FrameJobs(std::string stage, std::string verb, std::pair<std::int64_t
 
 void FrameJobs::run(std::size_t begin, std::size_t end, const std::function<void(std::int64_t frame)>& work) {
     tbb::parallel_for(begin, end, std::size_t(1), [&](std::size_t k) {
+        if (stopped()) return;
         const std::int64_t f = m_todo[k];
         std::string failure;
         bool input = true;
@@ -44,9 +47,19 @@ void FrameJobs::run(std::size_t begin, std::size_t end, const std::function<void
     });
 }
 
+bool FrameJobs::stopped() const { return InterruptGuard::received() != 0; }
+
 void FrameJobs::finish() {
-    if (m_progress) m_progress->finish();
-    if (m_failures.empty()) return;
+    if (m_progress) m_progress->finish(m_done);
+    if (m_failures.empty()) {
+        if (stopped() && m_done < m_todo.size())
+            throw Interrupted(InterruptGuard::received(),
+                              fmt::format("{} during the {} stage: {} of {} frames {} (complete and kept), {} not "
+                                          "started",
+                                          strsignal(InterruptGuard::received()), m_stage, m_done, m_todo.size(),
+                                          m_verb, m_todo.size() - m_done));
+        return;
+    }
     std::sort(m_failures.begin(), m_failures.end());
     std::string text;
     for (const auto& [frame, what] : m_failures) text += (text.empty() ? "" : "\n") + what;

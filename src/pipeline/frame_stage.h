@@ -37,13 +37,16 @@ public:
     std::size_t skipped() const { return m_skipped; }
     std::size_t done() const { return m_done; }
     bool failed() const { return !m_failures.empty(); }
+    /// A SIGINT or SIGTERM arrived (see InterruptGuard): frames not yet started are left alone.
+    bool stopped() const;
 
     /// Runs work(frame) for todo()[begin, end) in parallel. A frame that throws is recorded as
-    /// "<stage>: frame F: <what>" and the others go on.
+    /// "<stage>: frame F: <what>" and the others go on; once stopped() no further frame starts, and the frames
+    /// under way finish.
     void run(std::size_t begin, std::size_t end, const std::function<void(std::int64_t frame)>& work);
     /// Finishes the progress line; then, when a frame failed, throws listing every failure in frame order and
     /// saying that the frames done are complete and kept: InputError when every failure was bad input,
-    /// std::runtime_error otherwise (a full disk).
+    /// std::runtime_error otherwise (a full disk). When stopped, throws Interrupted saying how many frames are done.
     void finish();
 
 private:

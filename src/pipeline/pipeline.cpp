@@ -1,6 +1,7 @@
 #include "pipeline/pipeline.h"
 #include "pipeline/stages.h"
 
+#include "app/interrupt.h"
 #include "app/report.h"
 #include "core/errors.h"
 #include "io/atomic_file.h"
@@ -9,7 +10,9 @@
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
+#include <algorithm>
 #include <cstdio>
+#include <cstring>
 
 namespace ganache {
 
@@ -48,6 +51,29 @@ std::pair<std::int64_t, std::int64_t> parseFrameRange(const std::string& text, c
     return {a, b};
 }
 
+namespace {
+
+constexpr const char* kStageNames[] = {"sample", "simulate", "surface", "render"};
+
+/// How to carry on after a stop in stage k of `stages`: where a simulation can resume, the same command with
+/// --resume; past it, the per-frame stages left, which skip the frames already done.
+std::string continueAdvice(const RunOptions& options, const std::vector<StageId>& stages, std::size_t k,
+                           const std::filesystem::path& out, const std::function<bool(StageId)>& works) {
+    const bool simulates = std::find(stages.begin(), stages.end(), StageId::Simulate) != stages.end();
+    if (stages[k] == StageId::Sample || stages[k] == StageId::Simulate)
+        return simulates ? "run the same command with --resume" : "run the same command";
+    std::string commands;
+    for (std::size_t i = k; i < stages.size(); ++i)
+        if (works(stages[i]))
+            commands += fmt::format("{}`ganache {} {} --out {}{}{}`", commands.empty() ? "" : ", then ",
+                                kStageNames[int(stages[i])], options.scene.string(), out.string(),
+                                options.quality == "preview" ? "" : " --quality " + options.quality,
+                                options.frames.empty() ? "" : " --frames " + options.frames);
+    return commands + " (frames already done are skipped)";
+}
+
+}  // namespace
+
 void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
     const Quality quality = Quality::parse(options.quality);
     if (options.threads < 0) throw InputError("--threads must be 0 (every core) or a positive number");
@@ -59,45 +85,73 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
     const OutputLayout layout{options.out.empty() ? std::filesystem::path("out") / scene.name : options.out,
                               scene.name};
+    prepareOutputFolder(layout.root, "--out");
+    // From here on SIGINT / SIGTERM stop the run at the next safe point (a step, a frame), and every ending, good
+    // or bad, leaves a report.json that says how it ended: an older report never stays behind to mislead.
+    const InterruptGuard guard;
     RunReport report(scene, threads);
-    checkResources(scene, layout, frames, stages, options.memoryGiB, options.skipResourceCheck, report);
-    if (const std::size_t stale = removeStaleTemporaries(layout.root))
-        fmt::print(stderr, "removed {} unfinished file(s) that a killed run left in {}\n", stale, layout.root.string());
-    const bool simulates = std::find(stages.begin(), stages.end(), StageId::Simulate) != stages.end();
-    const std::optional<Checkpoint> resumeFrom =
-        options.resume && simulates ? findResumePoint(scene, layout, report) : std::nullopt;
-
-    // A stage run on its own must be asked for by the scene (`run` skips it quietly instead).
-    auto requireSection = [&](const char* section, bool requested) {
-        if (stages.size() == 1 && !requested)
-            throw InputError(fmt::format("ganache {0}: scene '{1}' ({2}) has no `{0}:` section\n  fix: add `{0}: {{}}` "
-                                         "for the defaults (see scenes/README.md)",
-                                         section, scene.name, scene.file.string()));
+    std::size_t current = 0;  // the stage under way
+    auto writeOutcome = [&](const char* status, const std::string& why) {
+        report.setOutcome(status, why);
+        try {
+            report.write(layout.report());
+        } catch (const std::exception&) {  // e.g. the full disk that stopped the run: its error is the one to see
+        }
     };
-    for (StageId id : stages) {
-        if (id == StageId::Sample) {
-            if (resumeFrom && std::filesystem::exists(layout.sample())) {
-                StageRecord& stage = report.addStage("sample");
-                stage.status = "skipped";
-                stage.note = "resuming: the sample the checkpoint was simulated from is kept";
+    // The stages that will do work: `run` passes over those the scene does not ask for.
+    const std::function<bool(StageId)> works = [&](StageId id) {
+        return !(stages.size() > 1 && ((id == StageId::Surface && !scene.surface.requested) ||
+                                       (id == StageId::Render && !scene.render.requested)));
+    };
+    try {
+        checkResources(scene, layout, frames, stages, options.memoryGiB, options.skipResourceCheck, report);
+        if (const std::size_t stale = removeStaleTemporaries(layout.root))
+            fmt::print(stderr, "removed {} unfinished file(s) that a killed run left in {}\n", stale,
+                       layout.root.string());
+        const bool simulates = std::find(stages.begin(), stages.end(), StageId::Simulate) != stages.end();
+        const std::optional<Checkpoint> resumeFrom =
+            options.resume && simulates ? findResumePoint(scene, layout, report) : std::nullopt;
+
+        // A stage run on its own must be asked for by the scene (`run` skips it quietly instead).
+        auto requireSection = [&](const char* section, bool requested) {
+            if (stages.size() == 1 && !requested)
+                throw InputError(fmt::format("ganache {0}: scene '{1}' ({2}) has no `{0}:` section\n  fix: add `{0}: "
+                                             "{{}}` for the defaults (see scenes/README.md)",
+                                             section, scene.name, scene.file.string()));
+        };
+        for (current = 0; current < stages.size(); ++current) {
+            const StageId id = stages[current];
+            if (const int signal = InterruptGuard::received(); signal && works(id))
+                throw Interrupted(signal, fmt::format("{} before the {} stage; the stages before it are complete",
+                                                      strsignal(signal), kStageNames[int(id)]));
+            if (id == StageId::Sample) {
+                if (resumeFrom && std::filesystem::exists(layout.sample())) {
+                    StageRecord& stage = report.addStage("sample");
+                    stage.status = "skipped";
+                    stage.note = "resuming: the sample the checkpoint was simulated from is kept";
+                } else {
+                    runSample(scene, layout, report);
+                }
+            } else if (id == StageId::Simulate) {
+                runSimulate(scene, layout, frames, resumeFrom, report);
+            } else if (id == StageId::Surface) {
+                requireSection("surface", scene.surface.requested);
+                runSurface(scene, layout, frames, options.force, threads, options.memoryGiB, report);
             } else {
-                runSample(scene, layout, report);
-            }
-        } else if (id == StageId::Simulate) {
-            runSimulate(scene, layout, frames, resumeFrom, report);
-        } else if (id == StageId::Surface) {
-            requireSection("surface", scene.surface.requested);
-            runSurface(scene, layout, frames, options.force, threads, options.memoryGiB, report);
-        } else {
-            requireSection("render", scene.render.requested);
-            try {
+                requireSection("render", scene.render.requested);
                 runRender(scene, layout, frames, options.force, report);
-            } catch (const InputError&) {
-                report.write(layout.report());  // the frames that did render are in it
-                throw;
             }
         }
+    } catch (const Interrupted& e) {
+        const std::string what =
+            fmt::format("{}\n  continue: {}", e.what(), continueAdvice(options, stages, current, layout.root, works));
+        writeOutcome("interrupted", what);
+        throw Interrupted(e.signal(), what);
+    } catch (const std::exception& e) {
+        writeOutcome("failed", e.what());
+        throw;
     }
+    report.setOutcome("done", "");
     report.write(layout.report());
     fmt::print(stderr, "{}", report.table());
     fmt::print(stderr, "outputs in {} (report: {})\n", layout.root.string(), layout.report().string());

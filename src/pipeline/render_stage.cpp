@@ -196,6 +196,7 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         view.groundHeight = ground;
         view.meshes = bodiesAt(scene, cache.info.time);
         Vec3 lo = Vec3::Constant(std::numeric_limits<Real>::infinity()), hi = -lo;
+        std::vector<std::string> notes;
         const bool mesh = usesMesh(f);
         if (mesh) {
             if (!std::filesystem::exists(layout.mesh(f)))
@@ -203,6 +204,11 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
                                              "--frames {}`, or render with `view: auto`",
                                              layout.mesh(f).string(), scene.file.string(), f));
             SurfaceMesh surface = readObj(layout.mesh(f));
+            if (surface.triangles.empty() && !cache.fluid.empty())
+                notes.push_back(fmt::format("frame {}: the preview shows no fluid: the surface mesh of its {} fluid "
+                                            "particle(s) is empty (see the surface stage's warning); render with "
+                                            "`view: particles` to see them",
+                                            f, cache.fluid.size()));
             DrawMesh m;
             m.points = std::move(surface.points);
             m.normals = std::move(surface.normals);
@@ -225,7 +231,6 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
             view.legend = Legend{title, a, b};
             grow(lo, hi, cache.fluid.x());
         }
-        std::vector<std::string> notes;
         if ((lo.array() <= hi.array()).all()) {
             const Vec3 d = view.camera.target - view.camera.position;
             if ((view.camera.position.array() > lo.array()).all() && (view.camera.position.array() < hi.array()).all())
@@ -269,7 +274,7 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         }
     }
     // The video, from every frame of the range, when ffmpeg is there.
-    if (settings.video && !jobs.failed() && (done > 0 || !std::filesystem::exists(layout.video()))) {
+    if (settings.video && !jobs.failed() && !jobs.stopped() && (done > 0 || !std::filesystem::exists(layout.video()))) {
         if (!onPath("ffmpeg")) {
             videoNote = "; no MP4: ffmpeg is not installed (`apt-get install ffmpeg`)";
         } else {

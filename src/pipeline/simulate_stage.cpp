@@ -130,8 +130,8 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
         writeFrame(fr.start);
     }
 
-    // SIGINT / SIGTERM stop the run between two steps, with a checkpoint of that moment.
-    const InterruptGuard guard;
+    // SIGINT / SIGTERM (caught by the caller's InterruptGuard) stop the run between two steps, with a checkpoint of
+    // that moment.
     const auto keepGoing = [] { return InterruptGuard::received() == 0; };
     std::size_t checkpoints = 0;
     double checkpointSeconds = 0;
@@ -144,10 +144,8 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
             stage.seconds = clock.seconds();
             stage.outputs.push_back(saved.string());
             report.setSimulation(sim.stats(), sim.time(), sim.effectSummaries(), sim.particles().size());
-            report.write(layout.report());
             throw Interrupted(signal,
-                              fmt::format("{} during frame {} (t = {:.4f} s); the state is saved in {}\n  continue: "
-                                          "run the same command with --resume",
+                              fmt::format("{} during frame {} (t = {:.4f} s); the state is saved in {}",
                                           strsignal(signal), f, sim.time(), saved.string()));
         }
         writeFrame(f);

@@ -42,12 +42,13 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
         }
     };
     std::mutex lock;
+    std::vector<std::string> warnings;
     std::size_t particles = 0, triangles = 0;
     double frameSeconds = 0;
     // Frames in parallel, as many at once as the memory allows (each frame is itself parallel); a batch that
     // fails ends the stage.
     std::size_t batch = 1;
-    for (std::size_t start = 0; start < todo.size() && !jobs.failed(); start += batch) {
+    for (std::size_t start = 0; start < todo.size() && !jobs.failed() && !jobs.stopped(); start += batch) {
         // The batch's first frame sizes the batch, and is then surfaced from this same read.
         std::optional<CacheContents> first;
         try {
@@ -81,16 +82,25 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
                                      surface.mesh().temperature.empty() ? "" : "; vt u = temperature [C] per vertex"));
             }
             const std::lock_guard<std::mutex> guard(lock);
+            if (surface.activeVoxels() == 0 && !cache.fluid.empty())
+                warnings.push_back(fmt::format(
+                    "surface: frame {}: its {} fluid particle(s) gave an empty surface (no mesh, no level set): they "
+                    "are too scattered for method {} (lone particles have no neighbours to share a surface with); "
+                    "method: spheres keeps every particle, or sample the fluid at a finer --quality",
+                    f, cache.fluid.size(), surfaceMethodName(settings.method)));
             particles += cache.fluid.size();
             triangles += surface.mesh().triangles.size();
             frameSeconds += frameClock.seconds();
         });
     }
+    std::sort(warnings.begin(), warnings.end());
+    for (const std::string& w : warnings) report.addWarning(w);
+    for (std::int64_t f : todo)
+        if (std::filesystem::exists(layout.surface(f))) {
+            stage.outputs.push_back(layout.surface(f).string());
+            if (settings.mesh) stage.outputs.push_back(layout.mesh(f).string());
+        }
     jobs.finish();
-    for (std::int64_t f : todo) {
-        stage.outputs.push_back(layout.surface(f).string());
-        if (settings.mesh) stage.outputs.push_back(layout.mesh(f).string());
-    }
     const std::size_t done = jobs.done();
     stage.seconds = clock.seconds();
     stage.status = todo.empty() ? "skipped" : "done";

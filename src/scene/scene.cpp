@@ -120,8 +120,8 @@ FluidSpec readFluid(Section s, std::size_t index, const std::vector<Material>& c
     f.at = s.where();
     f.name = s.name("name", fmt::format("fluid{}", index));
     f.material = readMaterialChoice(s, custom);
-    f.velocity = s.vec3("velocity", f.velocity, "m/s");
-    f.angularVelocity = s.vec3("angular_velocity", f.angularVelocity, "rad/s");
+    f.velocity = s.vec3("velocity", f.velocity, "m/s", limits::kSpeed);
+    f.angularVelocity = s.vec3("angular_velocity", f.angularVelocity, "rad/s", limits::kAngularVelocity);
     f.jitter = s.number("jitter", f.jitter, "x lattice spacing", Bounds::closed(0, 0.25));
     f.temperature = s.number("temperature", f.temperature, "C (used with the heat effect)", Bounds{-273.15, 1e4});
     const std::string shape = pickShape(s, {"box", "sphere", "mesh"});
@@ -229,7 +229,7 @@ EmitterSpec readEmitter(Section s, std::size_t index, const Scene& scene, const 
     }
     e.position = s.vec3("position", std::nullopt, "m");
     e.direction = s.direction("direction", e.direction);
-    e.speed = s.positive("speed", std::nullopt, "m/s");
+    e.speed = s.number("speed", std::nullopt, "m/s", Bounds{0, limits::kSpeed, true, false});
     e.temperature = s.number("temperature", e.temperature, "C (used with the heat effect)", Bounds{-273.15, 1e4});
     std::tie(e.start, e.end) = readTimeWindow(s, scene.frames.timeOf(scene.frames.end));
     if (auto m = s.child("motion")) e.motion = readMotion(*m);
@@ -462,7 +462,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
 
     {
         Section fr = root.section("frames");
-        scene.frames.fps = fr.positive("fps", scene.frames.fps, "frames/s");
+        scene.frames.fps = fr.number("fps", scene.frames.fps, "frames/s", Bounds{0, limits::kFps, true, false});
         scene.frames.start = fr.integer("start", scene.frames.start, 0, 9999);
         scene.frames.end = fr.integer("end", scene.frames.end, 0, 9999);
         if (scene.frames.end < scene.frames.start)
@@ -478,14 +478,27 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     scene.previewScale = particles.number("preview_scale", scene.previewScale, "x radius", Bounds{1, 100});
     scene.maxParticles = particles.integer("max_count", scene.maxParticles, 1, 2'000'000'000);
     particles.rejectUnused();
-    scene.particleRadius = scene.finalRadius * (quality.label == "preview" ? scene.previewScale
-                                                : quality.label == "final" ? 1 : quality.scale);
+    const Real radiusScale = quality.label == "preview" ? scene.previewScale
+                             : quality.label == "final" ? 1
+                                                        : quality.scale;
+    scene.particleRadius = scene.finalRadius * radiusScale;
 
     Section domain = root.require("domain", "domain: {min: [-1, -1, -1], max: [1, 1, 1]}");
-    scene.domainMin = domain.vec3("min", std::nullopt, "m");
-    scene.domainMax = domain.vec3("max", std::nullopt, "m");
+    scene.domainMin = domain.vec3("min", std::nullopt, "m", limits::kCoordinate);
+    scene.domainMax = domain.vec3("max", std::nullopt, "m", limits::kCoordinate);
     requireOrdered(domain, scene.domainMin, scene.domainMax, "domain");
     domain.rejectUnused();
+    // The domain must hold a kernel support (four radii) along every axis, or nothing in the scene can interact.
+    const Real narrowest = (scene.domainMax - scene.domainMin).minCoeff();
+    if (!(4 * scene.particleRadius <= narrowest))
+        throw SceneError(scene.radiusAt,
+                         fmt::format("particles.radius {} m gives a kernel support of {:.3g} m at {} quality, wider "
+                                     "than the domain's narrowest side ({} m)",
+                                     formatNumber(scene.finalRadius), 4 * scene.particleRadius, quality.str(),
+                                     formatNumber(narrowest)),
+                         fmt::format("give particles.radius well below {:.3g} m (a tenth of a fluid's size is already "
+                                     "coarse)",
+                                     narrowest / 4 / radiusScale));
 
     const std::vector<Material> custom = readMaterials(root.child("materials"));
     auto fluids = root.list("fluids");
@@ -522,6 +535,17 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
                                        formatNumber(t.dtMin)),
                     "make max at least min");
         t.fixedDt = ts.number("fixed", t.fixedDt, "s (0: adaptive CFL step)", Bounds::nonNegative());
+        // A step so short that a frame takes millions of them would run for days: input, not a run-time surprise.
+        const Real shortest = 1 / (scene.frames.fps * limits::kStepsPerFrame);
+        for (const char* key : {"min", "fixed"}) {
+            const Real dt = std::string(key) == "min" ? t.dtMin : t.fixedDt;
+            if (dt > 0 && dt < shortest)
+                ts.fail(key, fmt::format("simulation.time_step.{} ({} s) would take up to {:.3g} steps a frame at {} "
+                                         "frames/s",
+                                         key, formatNumber(dt), 1 / (scene.frames.fps * dt),
+                                         formatNumber(scene.frames.fps)),
+                        fmt::format("give a step of at least {:.3g} s (a million steps a frame)", shortest));
+        }
         ts.rejectUnused();
         Section ps = sim.section("pressure");
         PressureSettings& p = scene.pressure;
@@ -558,7 +582,9 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
 
     const Real estimate = estimateFluidParticles(scene, scene.particleRadius);
     if (estimate > Real(scene.maxParticles)) {
-        const Real fits = scene.particleRadius * std::cbrt(estimate / Real(scene.maxParticles));
+        // Scaled from a radius whose count is finite, so that an absurdly small radius still gets a usable fix.
+        const Real base = std::isfinite(estimate) ? scene.particleRadius : 1e-3 * narrowest;
+        const Real fits = base * std::cbrt(estimateFluidParticles(scene, base) / Real(scene.maxParticles));
         throw SceneError(scene.radiusAt,
                          fmt::format("a particle radius of {} m ({} quality) gives about {:.3g} fluid particles, "
                                      "above particles.max_count = {}",

@@ -90,6 +90,9 @@ std::size_t editDistance(const std::string& a, const std::string& b) {
 std::string describeBounds(const Bounds& b, const std::string& unit) {
     const bool hasLo = std::isfinite(b.lo), hasHi = std::isfinite(b.hi);
     const std::string u = unitSuffix(unit);
+    if (hasLo && hasHi && (b.loOpen || b.hiOpen))
+        return fmt::format("{} {} and {} {}{}", b.loOpen ? ">" : ">=", formatNumber(b.lo), b.hiOpen ? "<" : "<=",
+                           formatNumber(b.hi), u);
     if (hasLo && hasHi)
         return fmt::format("between {} and {}{}", formatNumber(b.lo), formatNumber(b.hi), u);
     if (hasLo) return fmt::format("{} {}{}", b.loOpen ? ">" : ">=", formatNumber(b.lo), u);
@@ -248,7 +251,7 @@ std::int64_t Section::integer(const std::string& key, std::optional<std::int64_t
     return v;
 }
 
-Vec3 Section::vec3(const std::string& key, std::optional<Vec3> fallback, const std::string& unit) {
+Vec3 Section::vec3(const std::string& key, std::optional<Vec3> fallback, const std::string& unit, Real maxNorm) {
     const YAML::Node n = m->value(key);
     Vec3 v;
     if (!n.IsDefined()) {
@@ -277,6 +280,10 @@ Vec3 Section::vec3(const std::string& key, std::optional<Vec3> fallback, const s
                                  fmt::format("write `{}: [x, y, z]` with plain finite numbers", key));
             }
         }
+        if (!(v.stableNorm() <= maxNorm))
+            fail(key, fmt::format("{} has a magnitude of {:.3g}{}, above the {}{} a scene may use", keyPath(key),
+                                  v.stableNorm(), unitSuffix(unit), formatNumber(maxNorm), unitSuffix(unit)),
+                 fmt::format("give a vector no longer than {}{}", formatNumber(maxNorm), unitSuffix(unit)));
     }
     m->record(key, Json::array({v.x(), v.y(), v.z()}), unit);
     return v;
@@ -368,6 +375,27 @@ std::string Section::exactlyOne(const std::vector<std::string>& keys, const std:
     return found;
 }
 
+namespace {
+
+/// Why `p` cannot be read as a file: empty when it is a regular file, else what it is instead.
+std::string notARegularFile(const std::filesystem::path& p) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    const fs::file_status st = fs::status(p, ec);
+    switch (st.type()) {
+    case fs::file_type::regular: return {};
+    case fs::file_type::not_found: return "does not exist";
+    case fs::file_type::directory: return "is a folder, not a file";
+    case fs::file_type::fifo: return "is a FIFO (named pipe), not a regular file";
+    case fs::file_type::character: return "is a character device, not a regular file";
+    case fs::file_type::block: return "is a block device, not a regular file";
+    case fs::file_type::socket: return "is a socket, not a regular file";
+    default: return ec ? fmt::format("cannot be examined ({})", ec.message()) : "is not a regular file";
+    }
+}
+
+}  // namespace
+
 std::filesystem::path Section::file(const std::string& key) {
     const YAML::Node n = m->value(key);
     if (!n.IsDefined() || !n.IsScalar() || n.Scalar().empty())
@@ -375,10 +403,13 @@ std::filesystem::path Section::file(const std::string& key) {
              fmt::format("write `{}: path/to/file`, relative to the scene file", key));
     std::filesystem::path p = n.Scalar();
     if (p.is_relative()) p = std::filesystem::path(m->out->file).parent_path() / p;
-    std::error_code ec;
-    if (!std::filesystem::is_regular_file(p, ec))
+    const std::string problem = notARegularFile(p);
+    if (problem == "does not exist")
         fail(key, fmt::format("{}: file '{}' does not exist (looked for {})", keyPath(key), n.Scalar(), p.string()),
              "check the spelling; relative paths start at the folder of the scene file");
+    if (!problem.empty())
+        fail(key, fmt::format("{}: '{}' ({}) {}", keyPath(key), n.Scalar(), p.string(), problem),
+             "give the path of a regular file (a mesh file: .obj, .ply, .stl, ...)");
     // The effective scene names the file absolutely, so its printout loads from anywhere.
     p = std::filesystem::absolute(p).lexically_normal();
     m->record(key, p.string(), "");
@@ -451,12 +482,12 @@ void Section::rejectUnused() const {
 Section openSceneFile(const std::filesystem::path& file) {
     auto out = std::make_shared<EffectiveScene>();
     out->file = file.string();
-    std::error_code ec;
-    if (!std::filesystem::exists(file, ec))
+    const std::string problem = notARegularFile(file);
+    if (problem == "does not exist")
         throw InputError(fmt::format("{}: scene file does not exist\n  fix: check the path; scenes/ holds examples",
                                      file.string()));
-    if (!std::filesystem::is_regular_file(file, ec))
-        throw InputError(fmt::format("{}: not a regular file\n  fix: give the path of a .yaml scene", file.string()));
+    if (!problem.empty())
+        throw InputError(fmt::format("{}: {}\n  fix: give the path of a .yaml scene", file.string(), problem));
     std::ifstream in(file, std::ios::binary);
     if (!in) throw InputError(fmt::format("{}: cannot be read (permissions?)", file.string()));
     std::stringstream text;

@@ -29,6 +29,19 @@ struct Bounds {
     static Bounds closed(Real lo, Real hi) { return {lo, hi, false, false}; }
 };
 
+/// The largest magnitudes a scene may ask for. Beyond them the model means nothing and the quantities derived from
+/// them (time steps, particle counts, positions) overflow or stall, so they are input errors at their key.
+namespace limits {
+constexpr Real kSpeed = 1e3;            ///< m/s: near the speed of sound in water, which incompressible SPH leaves out
+constexpr Real kAcceleration = 1e4;     ///< m/s^2: about 1,000 g
+constexpr Real kAngularVelocity = 1e4;  ///< rad/s: about 95,000 rpm
+constexpr Real kCoordinate = 1e5;       ///< m: 100 km from the origin
+constexpr Real kFps = 1e3;              ///< frames/s: a high-speed camera's
+constexpr Real kViscosity = 1e10;       ///< Pa s: 50 times pitch's; anything stiffer is a solid (a boundary body)
+constexpr Real kDensity = 1e5;          ///< kg/m^3: four times osmium's
+constexpr Real kStepsPerFrame = 1e6;    ///< what a time step may be short enough to need
+}  // namespace limits
+
 /// One map of a scene file, with the file name and the keys read so far. Reads throw SceneError with
 /// file:line:col, what is wrong and how to fix it. Call rejectUnused() after the last read. A copy has its own
 /// record of the keys read.
@@ -56,7 +69,9 @@ public:
     }
     std::int64_t integer(const std::string& key, std::optional<std::int64_t> fallback, std::int64_t lo,
                          std::int64_t hi);
-    Vec3 vec3(const std::string& key, std::optional<Vec3> fallback, const std::string& unit);
+    /// A vector [x, y, z]; one longer than maxNorm is an error (see limits).
+    Vec3 vec3(const std::string& key, std::optional<Vec3> fallback, const std::string& unit,
+              Real maxNorm = std::numeric_limits<Real>::infinity());
     /// A direction: a non-zero [x, y, z], returned normalised (the value read is recorded as given).
     Vec3 direction(const std::string& key, std::optional<Vec3> fallback);
     bool boolean(const std::string& key, bool fallback);

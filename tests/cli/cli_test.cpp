@@ -15,6 +15,7 @@
 #include <fstream>
 #include <map>
 #include <string>
+#include <csignal>
 #include <sys/wait.h>
 
 namespace fs = std::filesystem;
@@ -347,4 +348,110 @@ TEST(Cli, QuickStudyWritesItsTableChartsAndReport) {
     const Result noScenes = runGanache("study --quick --scenes /no/such/folder --out " + out.string());
     EXPECT_EQ(noScenes.code, 2);
     EXPECT_NE(noScenes.output.find("--scenes"), std::string::npos) << noScenes.output;
+}
+
+TEST(Cli, OutputFolderProblemsStopBeforeAnyWork) {
+    const fs::path dir = freshDir("out_is_a_file");
+    const fs::path file = dir / "taken";
+    std::ofstream(file) << "not a folder\n";
+    for (const fs::path& out : {file, file / "below"}) {
+        const Result r = runGanache("run " + kTiny + " --out " + out.string());
+        EXPECT_EQ(r.code, 2) << r.output;
+        EXPECT_NE(r.output.find(file.string() + " is a file, not a folder"), std::string::npos) << r.output;
+        EXPECT_NE(r.output.find("fix:"), std::string::npos) << r.output;
+        EXPECT_EQ(r.output.find("sample:"), std::string::npos) << "a stage ran first:\n" << r.output;
+    }
+    EXPECT_EQ(fs::directory_iterator(dir)->path(), file);  // nothing else was made
+}
+
+TEST(Cli, RangeMessagesAreWrittenForPeople) {
+    for (const char* value : {"0", "-1", "nan", "1e999"}) {
+        const Result r = runGanache("run " + kTiny + " --memory " + value);
+        EXPECT_EQ(r.code, 2) << r.output;
+        EXPECT_NE(r.output.find(fmt::format("--memory: must be a number of GiB above 0 (got '{}')", value)),
+                  std::string::npos)
+            << r.output;
+        EXPECT_EQ(r.output.find("1797"), std::string::npos) << r.output;  // no 309-digit bound
+    }
+}
+
+TEST(Cli, AFailedRunSaysSoInItsReport) {
+    const fs::path out = freshDir("failed_report");
+    ASSERT_EQ(runGanache("sample " + kTiny + " --out " + out.string()).code, 0);
+    auto result = [&] {
+        std::ifstream in(out / "report.json");
+        return nlohmann::json::parse(in)["result"];
+    };
+    EXPECT_EQ(result()["status"], "done");
+    // Surfacing frames that were never simulated fails; the sample's report must not stay behind as if all were well.
+    const Result r = runGanache("surface " + kTiny + " --out " + out.string());
+    EXPECT_EQ(r.code, 2) << r.output;
+    EXPECT_EQ(result()["status"], "failed");
+    EXPECT_NE(result()["error"].get<std::string>().find("has no particle cache"), std::string::npos) << result();
+}
+
+TEST(Cli, ScatteredParticlesWarnOfAnEmptySurfaceAndABlankPreview) {
+    // Two lone particles (a fluid of one lattice cell each): nothing to surface with the default method.
+    const fs::path dir = freshDir("scattered");
+    std::ofstream(dir / "scattered.yaml") << R"(ganache: 1
+frames: {fps: 24, start: 1, end: 1}
+particles: {radius: 0.01, preview_scale: 1}
+domain: {min: [-1, -1, -1], max: [1, 1, 1]}
+fluids:
+  - {name: a, box: {min: [0, 0, 0], max: [0.02, 0.02, 0.02]}}
+  - {name: b, box: {min: [0.5, 0, 0], max: [0.52, 0.02, 0.02]}}
+surface: {}
+render: {width: 160, height: 90, contact_sheet: 0, video: false}
+)";
+    const Result r = runGanache("run " + (dir / "scattered.yaml").string() + " --out " + (dir / "out").string());
+    ASSERT_EQ(r.code, 0) << r.output;
+    std::ifstream in(dir / "out/report.json");
+    const auto warnings = nlohmann::json::parse(in)["warnings"].dump();
+    EXPECT_NE(warnings.find("surface: frame 1: its 2 fluid particle(s) gave an empty surface"), std::string::npos)
+        << warnings;
+    EXPECT_NE(warnings.find("render: frame 1: the preview shows no fluid"), std::string::npos) << warnings;
+}
+
+namespace {
+
+// Sends `signal` to a per-frame stage once its first output appears; the stage finishes the frames under way,
+// keeps them, says how to carry on and exits with 128 + the signal. The same command then does the rest.
+void expectStopBetweenFrames(const std::string& stage, const fs::path& scene, const fs::path& out,
+                             const fs::path& firstOutput, int signal) {
+    const std::string args = stage + " " + scene.string() + " --threads 1 --out " + out.string();
+    const pid_t pid = startGanache(args, out / (stage + ".log"));
+    for (int k = 0; k < 60000 && !fs::exists(firstOutput); ++k) usleep(1000);
+    ASSERT_TRUE(fs::exists(firstOutput)) << stage << " wrote nothing in a minute";
+    kill(pid, signal);
+    const int code = waitFor(pid);
+    std::ifstream log(out / (stage + ".log"));
+    const std::string text((std::istreambuf_iterator<char>(log)), std::istreambuf_iterator<char>());
+    if (code == 0) return;  // every frame was done before the signal landed
+    EXPECT_EQ(code, 128 + signal) << text;
+    EXPECT_NE(text.find("during the " + stage + " stage"), std::string::npos) << text;
+    EXPECT_NE(text.find("(complete and kept)"), std::string::npos) << text;
+    EXPECT_NE(text.find("continue: `ganache " + stage + " " + scene.string()), std::string::npos) << text;
+    std::ifstream report(out / "report.json");
+    EXPECT_EQ(nlohmann::json::parse(report)["result"]["status"], "interrupted");
+    const Result rest = runGanache(args);
+    ASSERT_EQ(rest.code, 0) << rest.output;
+    EXPECT_NE(rest.output.find("up to date, skipped"), std::string::npos) << rest.output;
+}
+
+}  // namespace
+
+TEST(Cli, SignalsDuringSurfaceAndRenderStopBetweenFrames) {
+    const fs::path dir = freshDir("stop_between_frames");
+    const fs::path scene = dir / "many_frames.yaml";
+    writeTinyVariant(scene, "frames:", "frames: {fps: 200, start: 1, end: 30}\n");
+    {
+        std::ifstream tiny(kTiny);
+        const std::string text((std::istreambuf_iterator<char>(tiny)), std::istreambuf_iterator<char>());
+        std::ofstream(scene, std::ios::app) << text.substr(text.find("\nparticles:") + 1);
+    }
+    const fs::path out = dir / "out";
+    ASSERT_EQ(runGanache("sample " + scene.string() + " --out " + out.string()).code, 0);
+    ASSERT_EQ(runGanache("simulate " + scene.string() + " --out " + out.string()).code, 0);
+    expectStopBetweenFrames("surface", scene, out, out / "surface/many_frames.0001.vdb", SIGTERM);
+    expectStopBetweenFrames("render", scene, out, out / "preview/many_frames.0001.png", SIGINT);
 }

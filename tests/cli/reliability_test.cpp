@@ -117,19 +117,6 @@ TEST(Reliability, RunsKilledAtSeveralPointsResumeToTheUninterruptedFrames) {
         }
         expectOnlyCompleteFiles(out, "after kill " + std::to_string(k));
     }
-    // SIGTERM (a farm scheduler's stop): a checkpoint of that moment and exit 143.
-    const pid_t pid = startGanache(args, out / "term.log");
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    kill(pid, SIGTERM);
-    const int code = waitFor(pid);
-    const std::string log = readBytes(out / "term.log");
-    if (code != 0) {  // it may have finished first on a fast machine
-        EXPECT_EQ(code, 143) << log;
-        EXPECT_NE(log.find("the state is saved in"), std::string::npos) << log;
-        EXPECT_NE(log.find("--resume"), std::string::npos) << log;
-    }
-    expectOnlyCompleteFiles(out, "after SIGTERM");
-
     const Result r = runGanache(args);
     ASSERT_EQ(r.code, 0) << r.output;
     expectReferenceFrames(out);
@@ -139,6 +126,29 @@ TEST(Reliability, RunsKilledAtSeveralPointsResumeToTheUninterruptedFrames) {
     std::size_t checkpoints = 0;
     for (const auto& e : fs::directory_iterator(out / "checkpoints")) checkpoints += e.path().extension() == ".ckpt";
     EXPECT_EQ(checkpoints, 2u);
+}
+
+TEST(Reliability, SigtermMidSimulationSavesTheStateAndResumesToTheSameFrames) {
+    // A farm scheduler's stop while frames are still to come (frame 2 of 9 has just appeared): a checkpoint of that
+    // moment, a message that says where it is and how to go on, exit 143, and a report that says so. Waiting for the
+    // frame, not a fixed delay, keeps this right on a loaded machine.
+    const fs::path out = freshDir("reliability_term");
+    const std::string args = "run " + kScene + " --threads 2 --resume --out " + out.string();
+    const pid_t pid = startGanache(args, out / "term.log");
+    ASSERT_TRUE(waitForFile(frame(out, 2), pid)) << readBytes(out / "term.log");
+    kill(pid, SIGTERM);
+    const int code = waitFor(pid);
+    const std::string log = readBytes(out / "term.log");
+    if (code != 0) {  // 0 only when frames 3-9 were done within the moment the signal took to arrive
+        EXPECT_EQ(code, 143) << log;
+        EXPECT_NE(log.find("the state is saved in"), std::string::npos) << log;
+        EXPECT_NE(log.find("continue: run the same command with --resume"), std::string::npos) << log;
+        EXPECT_EQ(nlohmann::json::parse(readBytes(out / "report.json"))["result"]["status"], "interrupted");
+    }
+    expectOnlyCompleteFiles(out, "after SIGTERM");
+    const Result r = runGanache(args);
+    ASSERT_EQ(r.code, 0) << r.output;
+    expectReferenceFrames(out);
 }
 
 TEST(Reliability, ADamagedCheckpointIsRejectedAndThePreviousOneUsed) {
@@ -192,7 +202,8 @@ TEST(Reliability, AFullDiskStopsWithAClearErrorAndKeepsWhatWasWritten) {
     const fs::path small = dir / "small", kept = dir / "kept";
     fs::create_directories(small);
     const std::string ganache = std::string(GANACHE_EXE) + " run " + kScene + " --threads 2 --out " + small.string();
-    // First without --skip-resource-check: the guard sees the small disk and refuses before writing anything.
+    // First without --skip-resource-check: the guard sees the small disk and refuses before any work, leaving only
+    // the report that says why.
     std::ofstream(dir / "tmpfs.sh") << "mount -t tmpfs -o size=640k tmpfs '" << small.string() << "' || exit 99\n"
                                     << ganache << "\necho guard=$?\nls -A '" << small.string() << "'\n"
                                     << ganache << " --skip-resource-check\necho exit=$?\ncp -a '" << small.string()
@@ -212,7 +223,7 @@ TEST(Reliability, AFullDiskStopsWithAClearErrorAndKeepsWhatWasWritten) {
     SCOPED_TRACE(tmpfs ? "tmpfs of 640 KiB" : "ulimit -f");
     if (tmpfs) {
         EXPECT_NE(r.output.find("error: the outputs need about"), std::string::npos) << r.output;
-        EXPECT_NE(r.output.find("guard=2\nplan:"), std::string::npos) << r.output;  // refused, nothing written
+        EXPECT_NE(r.output.find("guard=2\nreport.json\nplan:"), std::string::npos) << r.output;  // refused
     }
     EXPECT_NE(r.output.find("exit=1"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("error: cannot write"), std::string::npos) << r.output;
@@ -236,7 +247,13 @@ TEST(Reliability, TheResourceGuardPrintsItsEstimateAndRefusesWhatCannotFit) {
     EXPECT_NE(r.output.find("resume.yaml:6:"), std::string::npos) << r.output;  // particles.radius
     EXPECT_NE(r.output.find("more than the 1.0 MiB --memory allows"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("fix: raise particles.radius"), std::string::npos) << r.output;
-    EXPECT_TRUE(fs::is_empty(out));
+    // Nothing but the report, which says the run failed and why.
+    std::vector<fs::path> written;
+    for (const auto& e : fs::recursive_directory_iterator(out)) written.push_back(e.path());
+    ASSERT_EQ(written, std::vector<fs::path>{out / "report.json"});
+    const auto result = nlohmann::json::parse(readBytes(out / "report.json"))["result"];
+    EXPECT_EQ(result["status"], "failed");
+    EXPECT_NE(result["error"].get<std::string>().find("--memory allows"), std::string::npos) << result;
     r = runGanache("run " + kScene + " --memory 0.001 --skip-resource-check --frames 1-2 --out " + out.string());
     EXPECT_EQ(r.code, 0) << r.output;
 }

@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -154,4 +156,21 @@ TEST(Scene, AnEffectRegisteredOutsideReadsItsOwnSection) {
     } catch (const SceneError& e) {
         EXPECT_NE(std::string(e.what()).find("did you mean 'rate'"), std::string::npos) << e.what();
     }
+}
+
+TEST(Scene, AMeshPathThatIsNoRegularFileSaysWhatItIs) {
+    // Folders and devices are broken scenes (mesh_is_a_folder, mesh_is_a_device); a FIFO is made here.
+    const fs::path fifo = fs::temp_directory_path() / "ganache_scene_test_fifo";
+    fs::remove(fifo);
+    ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+    const fs::path scene = writeTemp("fifo_mesh.yaml", std::string(kMinimal).substr(0, std::string(kMinimal).find("fluids:")) +
+                                                           "fluids:\n  - mesh: {file: " + fifo.string() + "}\n");
+    try {
+        loadScene(scene, Quality::parse("final"));
+        ADD_FAILURE() << "a FIFO was taken for a mesh";
+    } catch (const SceneError& e) {
+        EXPECT_NE(std::string(e.what()).find("is a FIFO (named pipe), not a regular file"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("fix: give the path of a regular file"), std::string::npos) << e.what();
+    }
+    fs::remove(fifo);
 }

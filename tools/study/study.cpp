@@ -19,6 +19,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <map>
 #include <numeric>
@@ -280,10 +281,12 @@ struct Run {
 
 class Runner {
 public:
-    Runner(const fs::path& sceneDir, bool quick) : m_dir(sceneDir), m_quick(quick) {}
+    Runner(const fs::path& sceneDir, bool quick, std::function<int()> stopSignal)
+        : m_dir(sceneDir), m_quick(quick), m_stopSignal(std::move(stopSignal)) {}
 
     /// Runs the case with the point's settings until the case's end time.
     Run run(const Case& c, const Point& point) {
+        if (const int signal = stopSignal()) throw Interrupted(signal, "between two runs");
         // Quick mode: radii 1.26x (half the particles) and a quarter of each case's time.
         const Real factor = point.radiusFactor * (m_quick ? kQuickRadius : 1.0);
         Scene scene = loaded(c, factor);
@@ -302,7 +305,8 @@ public:
             Simulation sim(setup, sample->second.fluid, sample->second.boundaries);
             const ParticleSet initial = sim.particles();
             const auto start = std::chrono::steady_clock::now();
-            sim.advanceTo(end);
+            if (!sim.advanceTo(end, [&] { return stopSignal() == 0; }))
+                throw Interrupted(stopSignal(), "during a run");
             r.wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
             r.simulated = end;
             r.particles = sim.particles().size();
@@ -312,6 +316,8 @@ public:
             r.metrics = c.measure(scene, initial, sim);
         } catch (const InputError&) {
             throw;
+        } catch (const Interrupted&) {
+            throw;
         } catch (const std::exception& e) {
             r.failure = e.what();
             r.simulated = end;
@@ -320,6 +326,8 @@ public:
     }
 
 private:
+    int stopSignal() const { return m_stopSignal ? m_stopSignal() : 0; }
+
     /// The case's scene at `factor` times its preview radius, read (meshes included) once per case and factor.
     const Scene& loaded(const Case& c, Real factor) {
         const std::string key = fmt::format("{}@{}", c.name, factor);
@@ -333,6 +341,7 @@ private:
 
     fs::path m_dir;
     bool m_quick;
+    std::function<int()> m_stopSignal;
     std::map<std::string, Scene> m_scenes;    // by case and radius factor
     std::map<std::string, Sample> m_samples;  // by case and particle radius
 };
@@ -521,14 +530,14 @@ void studyCommand(const StudyOptions& options) {
                                          name));
     const int threads = options.threads > 0 ? options.threads : tbb::info::default_concurrency();
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
-    fs::create_directories(options.out);
+    prepareOutputFolder(options.out, "--out");
 
     const std::vector<Knob> knobList = knobs(options.quick);
     std::size_t total = 0;
     for (const Knob& k : knobList) total += k.points.size() - 1;
     total = studied.size() * (total + 1);
     for (const Case& c : studied) total += c.needsReference ? 1 : 0;
-    Runner runner(options.scenes, options.quick);
+    Runner runner(options.scenes, options.quick, options.stopSignal);
     std::vector<Run> runs;
     std::map<std::string, Run> references;
     std::size_t done = 0;
@@ -541,52 +550,60 @@ void studyCommand(const StudyOptions& options) {
             fmt::print(stderr, "study [{}/{}] {} {} = {}: failed: {}\n", done, total, r.caseName, r.knob, r.label,
                        r.failure);
     };
-    for (const Case& c : studied) {
-        if (c.needsReference) {
-            const Point tight{"reference", false, 1, [&](SimulationSetup& s) {
-                                  s.editEffect<ViscosityParams>("viscosity").tolerance = 1e-6;
-                                  s.pressure.densityError = 1e-5;
-                                  s.pressure.divergenceError = 1e-4;
-                                  s.timeStep.fixedDt = options.quick ? 5e-4 : 5e-5;
-                              }};
-            Run ref = runner.run(c, tight);
-            ref.knob = "reference";
-            note(ref);
-            references[c.name] = ref;
-        }
-        std::optional<Run> defaults;
-        for (const Knob& k : knobList)
-            for (const Point& p : k.points) {
-                Run r;
-                if (p.isDefault && defaults) {
-                    r = *defaults;
-                } else {
-                    r = runner.run(c, p);
+    try {
+        for (const Case& c : studied) {
+            if (c.needsReference) {
+                const Point tight{"reference", false, 1, [&](SimulationSetup& s) {
+                                      s.editEffect<ViscosityParams>("viscosity").tolerance = 1e-6;
+                                      s.pressure.densityError = 1e-5;
+                                      s.pressure.divergenceError = 1e-4;
+                                      s.timeStep.fixedDt = options.quick ? 5e-4 : 5e-5;
+                                  }};
+                Run ref = runner.run(c, tight);
+                ref.knob = "reference";
+                note(ref);
+                references[c.name] = ref;
+            }
+            std::optional<Run> defaults;
+            for (const Knob& k : knobList)
+                for (const Point& p : k.points) {
+                    Run r;
+                    if (p.isDefault && defaults) {
+                        r = *defaults;
+                    } else {
+                        r = runner.run(c, p);
+                        r.knob = k.name;
+                        note(r);
+                        if (p.isDefault) defaults = r;
+                    }
                     r.knob = k.name;
-                    note(r);
-                    if (p.isDefault) defaults = r;
+                    r.label = p.label;
+                    r.isDefault = p.isDefault;
+                    runs.push_back(r);
                 }
-                r.knob = k.name;
-                r.label = p.label;
-                r.isDefault = p.isDefault;
-                runs.push_back(r);
+            // Errors: exact answers, or the reference (the finest run for the resolution knob).
+            const Run* finest = nullptr;
+            for (const Run& r : runs)
+                if (r.caseName == c.name && r.knob == "resolution" && r.failure.empty() &&
+                    (!finest || r.particles > finest->particles))
+                    finest = &r;
+            for (Run& r : runs) {
+                if (r.caseName != c.name || !r.failure.empty()) continue;
+                if (!c.needsReference) {
+                    r.error = c.error(r.metrics, {});
+                } else {
+                    const Run* ref = r.knob == "resolution" ? finest : &references[c.name];
+                    if (ref && ref->failure.empty() && ref != &r) r.error = c.error(r.metrics, ref->metrics);
+                }
             }
-        // Errors: exact answers, or the reference (the finest run for the resolution knob).
-        const Run* finest = nullptr;
-        for (const Run& r : runs)
-            if (r.caseName == c.name && r.knob == "resolution" && r.failure.empty() &&
-                (!finest || r.particles > finest->particles))
-                finest = &r;
-        for (Run& r : runs) {
-            if (r.caseName != c.name || !r.failure.empty()) continue;
-            if (!c.needsReference) {
-                r.error = c.error(r.metrics, {});
-            } else {
-                const Run* ref = r.knob == "resolution" ? finest : &references[c.name];
-                if (ref && ref->failure.empty() && ref != &r) r.error = c.error(r.metrics, ref->metrics);
-            }
+            writeChart(options.out, c, knobList, runs);
         }
-        writeChart(options.out, c, knobList, runs);
+    } catch (const Interrupted& e) {
+        throw Interrupted(e.signal(),
+                          fmt::format("study: {} {} after {} of {} runs; the charts of the cases finished are in {}, "
+                                      "study.csv and report.md need every run and were not written\n  continue: run "
+                                      "the same command again (the study starts over)",
+                                      strsignal(e.signal()), e.what(), done, total, options.out.string()));
     }
     std::vector<Run> all = runs;
     for (const auto& [name, r] : references) all.push_back(r);

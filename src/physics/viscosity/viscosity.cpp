@@ -275,8 +275,8 @@ std::shared_ptr<const EffectParams> readViscosity(Section& s) {
     const std::string method = s.choice("method", "weiler2018", {"weiler2018", "explicit", "takahashi2015"});
     p->method = method == "explicit" ? Method::Explicit : method == "takahashi2015" ? Method::Takahashi2015
                                                                                      : Method::Weiler2018;
-    if (s.has("mu")) p->mu = s.number("mu", std::nullopt, "Pa s", Bounds::nonNegative());
-    p->boundaryMu = s.number("boundary_mu", p->boundaryMu, "Pa s", Bounds::nonNegative());
+    if (s.has("mu")) p->mu = s.number("mu", std::nullopt, "Pa s", Bounds::closed(0, limits::kViscosity));
+    p->boundaryMu = s.number("boundary_mu", p->boundaryMu, "Pa s", Bounds::closed(0, limits::kViscosity));
     if (p->method == Method::Explicit) {
         // Forward Euler has no solve: its only setting is how many sub-steps one step may take.
         for (const char* key : {"tolerance", "preconditioner", "warm_start"})
