@@ -25,11 +25,20 @@ int main(int argc, char** argv) {
                       "preview (default: particle radius x the scene's preview_scale), final (the scene's radius), "
                       "or a number that multiplies the radius");
     };
+    // Range messages written for people (CLI11's own quote the type's limits in hundreds of digits).
+    const CLI::Validator threadCount(
+        [](std::string& text) {
+            int v = 0;
+            return CLI::detail::lexical_cast(text, v) && v >= 0
+                       ? std::string()
+                       : fmt::format("must be 0 (every core) or a positive whole number (got '{}')", text);
+        },
+        "0: every core");
     auto addRunArgs = [&](CLI::App* c) {
         addSceneArgs(c);
         c->add_option("--out", opt.out, "output folder (default: out/<scene name>)");
         c->add_option("--frames", opt.frames, "frame range A-B (or one frame A) within the scene's frames");
-        c->add_option("--threads", opt.threads, "worker threads (default 0: every core)");
+        c->add_option("--threads", opt.threads, "worker threads (default 0: every core)")->check(threadCount);
         c->add_flag("--skip-resource-check", opt.skipResourceCheck,
                     "run even when the memory or disk estimate printed at the start exceeds what the machine has");
     };
@@ -94,7 +103,7 @@ int main(int argc, char** argv) {
     studyCmd->add_option("--out", study.out, "output folder (default: out/study; the committed study is docs/study)");
     studyCmd->add_option("--scenes", study.scenes, "folder of the study's scenes (default: scenes/study)");
     studyCmd->add_option("--case", study.cases, "only these cases: spinning_cube, couette, viscous_bunny");
-    studyCmd->add_option("--threads", study.threads, "worker threads (default 0: every core)");
+    studyCmd->add_option("--threads", study.threads, "worker threads (default 0: every core)")->check(threadCount);
 
     try {
         app.parse(argc, argv);

@@ -373,6 +373,12 @@ TEST(Cli, RangeMessagesAreWrittenForPeople) {
             << r.output;
         EXPECT_EQ(r.output.find("1797"), std::string::npos) << r.output;  // no 309-digit bound
     }
+    for (const std::string& args : {"run " + kTiny + " --threads abc", std::string("study --threads -2")}) {
+        const Result r = runGanache(args);
+        EXPECT_EQ(r.code, 2) << r.output;
+        EXPECT_NE(r.output.find("--threads: must be 0 (every core) or a positive whole number (got '"), std::string::npos)
+            << r.output;
+    }
 }
 
 TEST(Cli, AFailedRunSaysSoInItsReport) {

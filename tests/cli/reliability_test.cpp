@@ -77,7 +77,7 @@ void expectReferenceFrames(const fs::path& out) {
 
 // Waits until `file` exists (or the process ends); false when it ended first.
 bool waitForFile(const fs::path& file, pid_t pid) {
-    for (int k = 0; k < 6000; ++k) {
+    for (int k = 0; k < 30000; ++k) {  // up to a minute: a loaded machine is slow, not wrong
         if (fs::exists(file)) return true;
         if (waitpid(pid, nullptr, WNOHANG) == pid) return false;
         std::this_thread::sleep_for(std::chrono::milliseconds(2));
