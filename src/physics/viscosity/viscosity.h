@@ -149,6 +149,7 @@ private:
     std::vector<Mat3> m_fluidBlocks;
     BodyLoads m_passLoads;    // the viscous loads of the latest pass, which a later pass of the step replaces
     std::size_t m_lastStep = 0;
+    Real m_lastDt = 0;  // the step of the last first pass: scales the warm start
     bool m_hasSolved = false;
     ViscosityPass m_last;
     // Over the run:
