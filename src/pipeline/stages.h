@@ -32,7 +32,7 @@ std::optional<Checkpoint> findResumePoint(const Scene& scene, const OutputLayout
 void runSample(const Scene& scene, const OutputLayout& layout, RunReport& report);
 
 /// The simulate stage (simulate_stage.cpp), from the sample or from a checkpoint. Throws Interrupted after
-/// saving a checkpoint when SIGINT or SIGTERM arrives.
+/// saving a checkpoint when SIGINT or SIGTERM arrives (the caller holds the InterruptGuard).
 void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
                  const std::optional<Checkpoint>& from, RunReport& report);
 
