@@ -33,11 +33,14 @@ int main(int argc, char** argv) {
                        ? std::string()
                        : fmt::format("must be 0 (every core) or a positive whole number (got '{}')", text);
         },
-        "0: every core");
+        "");
     auto addRunArgs = [&](CLI::App* c) {
         addSceneArgs(c);
         c->add_option("--out", opt.out, "output folder (default: out/<scene name>)");
         c->add_option("--frames", opt.frames, "frame range A-B (or one frame A) within the scene's frames");
+        c->add_option("--report", opt.report,
+                      "where to write the run's report (default: <out>/report.json); runs that share an output "
+                      "folder at once, e.g. frame ranges on several machines, each name their own");
         c->add_option("--threads", opt.threads, "worker threads (default 0: every core)")->check(threadCount);
         c->add_flag("--skip-resource-check", opt.skipResourceCheck,
                     "run even when the memory or disk estimate printed at the start exceeds what the machine has");
@@ -84,7 +87,7 @@ int main(int argc, char** argv) {
                                ? std::string()
                                : fmt::format("must be a number of GiB above 0 (got '{}')", text);
                 },
-                "GiB > 0"));
+                ""));
     }
     bool check = false;
     subs[1]->add_flag("--check", check,

@@ -86,15 +86,18 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
     const OutputLayout layout{options.out.empty() ? std::filesystem::path("out") / scene.name : options.out,
                               scene.name};
     prepareOutputFolder(layout.root, "--out");
+    const std::filesystem::path reportFile = options.report.empty() ? layout.report() : options.report;
+    if (!options.report.empty()) prepareOutputFolder(std::filesystem::absolute(reportFile).parent_path(), "--report");
     // From here on SIGINT / SIGTERM stop the run at the next safe point (a step, a frame), and every ending, good
     // or bad, leaves a report.json that says how it ended: an older report never stays behind to mislead.
     const InterruptGuard guard;
     RunReport report(scene, threads);
+    report.setFrames(frames.first, frames.second);
     std::size_t current = 0;  // the stage under way
     auto writeOutcome = [&](const char* status, const std::string& why) {
         report.setOutcome(status, why);
         try {
-            report.write(layout.report());
+            report.write(reportFile);
         } catch (const std::exception&) {  // e.g. the full disk that stopped the run: its error is the one to see
         }
     };
@@ -152,9 +155,9 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
         throw;
     }
     report.setOutcome("done", "");
-    report.write(layout.report());
+    report.write(reportFile);
     fmt::print(stderr, "{}", report.table());
-    fmt::print(stderr, "outputs in {} (report: {})\n", layout.root.string(), layout.report().string());
+    fmt::print(stderr, "outputs in {} (report: {})\n", layout.root.string(), reportFile.string());
 }
 
 void meshCheckCommand(const RunOptions& options) {

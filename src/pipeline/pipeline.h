@@ -18,6 +18,7 @@ enum class StageId { Sample, Simulate, Surface, Render };
 struct RunOptions {
     std::filesystem::path scene;
     std::filesystem::path out;                       ///< empty: out/<scene name>
+    std::filesystem::path report;                    ///< empty: <out>/report.json
     std::string frames;                              ///< "A-B" or "A"; empty: the scene's frames
     int threads = 0;                                 ///< 0: every core
     std::string quality = "preview";

@@ -143,6 +143,32 @@ TEST(Cli, FramesLimitWhatIsWritten) {
     EXPECT_FALSE(fs::exists(out / "particles/tiny.0005.vdb"));
 }
 
+TEST(Cli, FrameRangesRunAtOnceKeepTheirOwnReports) {
+    // Two machines surfacing halves of one output folder at the same time: each names its report, so neither
+    // overwrites the other's, and the simulation's report stays.
+    const fs::path out = freshDir("own_reports");
+    ASSERT_EQ(runGanache("run " + kTiny + " --out " + out.string()).code, 0);
+    const std::string before = [&] {
+        std::ifstream in(out / "report.json");
+        return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    }();
+    const pid_t first = startGanache("surface " + kTiny + " --force --frames 1-2 --out " + out.string() +
+                                         " --report " + (out / "reports/surface.1-2.json").string(),
+                                     out / "first.log");
+    const Result second = runGanache("surface " + kTiny + " --force --frames 3-5 --out " + out.string() + " --report " +
+                                     (out / "reports/surface.3-5.json").string());
+    ASSERT_EQ(waitFor(first), 0);
+    ASSERT_EQ(second.code, 0) << second.output;
+    for (const char* range : {"1-2", "3-5"}) {
+        std::ifstream in(out / fmt::format("reports/surface.{}.json", range));
+        const auto report = nlohmann::json::parse(in);
+        EXPECT_EQ(report["result"]["status"], "done");
+        EXPECT_EQ(report["frames"]["first"], range[0] - '0') << report["frames"];
+    }
+    std::ifstream in(out / "report.json");
+    EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()), before);
+}
+
 TEST(Cli, RenderHandsItsFramesToFfmpeg) {
     // A stand-in ffmpeg on the PATH records how it is called and writes the file it is asked for; a second one
     // fails, which must leave no video and only a warning.
