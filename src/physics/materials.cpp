@@ -98,12 +98,12 @@ ViscosityLaw readViscosityLaw(Section s) {
     ViscosityLaw law;
     if (s.exactlyOne({"reynolds", "ramp"}, "viscosity law", "e.g. `reynolds: {mu0: 5.0e6, alpha: 0.35}`") == "reynolds") {
         Section r = *s.child("reynolds");
-        law.mu0 = r.number("mu0", std::nullopt, "Pa s", Bounds{0, limits::kViscosity, true, false});
+        law.mu0 = r.number("mu0", std::nullopt, "Pa s", Bounds::positiveUpTo(limits::kViscosity));
         law.t0 = r.number("t0", law.t0, "C");
         law.alpha = r.number("alpha", std::nullopt, "1/K");
-        law.muMin = r.number("min", law.mu0 * 1e-6, "Pa s", Bounds{0, limits::kViscosity, true, false});
+        law.muMin = r.number("min", law.mu0 * 1e-6, "Pa s", Bounds::positiveUpTo(limits::kViscosity));
         law.muMax = r.number("max", std::min(law.mu0 * 1e6, limits::kViscosity), "Pa s",
-                               Bounds{0, limits::kViscosity, true, false});
+                               Bounds::positiveUpTo(limits::kViscosity));
         if (law.muMax < law.muMin)
             r.fail("max", fmt::format("{}.max ({} Pa s) is below min ({} Pa s)", r.path(), formatNumber(law.muMax),
                                       formatNumber(law.muMin)),
@@ -117,7 +117,7 @@ ViscosityLaw readViscosityLaw(Section s) {
                 p.fail("temperature", fmt::format("{}.temperature ({} C) must be above the previous point's ({} C)",
                                                   p.path(), formatNumber(t), formatNumber(law.ramp.back().first)),
                        "list the ramp in increasing temperature");
-            law.ramp.emplace_back(t, p.number("mu", std::nullopt, "Pa s", Bounds{0, limits::kViscosity, true, false}));
+            law.ramp.emplace_back(t, p.number("mu", std::nullopt, "Pa s", Bounds::positiveUpTo(limits::kViscosity)));
             p.rejectUnused();
         }
         if (law.ramp.empty())

@@ -229,7 +229,7 @@ EmitterSpec readEmitter(Section s, std::size_t index, const Scene& scene, const 
     }
     e.position = s.vec3("position", std::nullopt, "m");
     e.direction = s.direction("direction", e.direction);
-    e.speed = s.number("speed", std::nullopt, "m/s", Bounds{0, limits::kSpeed, true, false});
+    e.speed = s.number("speed", std::nullopt, "m/s", Bounds::positiveUpTo(limits::kSpeed));
     e.temperature = s.number("temperature", e.temperature, "C (used with the heat effect)", Bounds{-273.15, 1e4});
     std::tie(e.start, e.end) = readTimeWindow(s, scene.frames.timeOf(scene.frames.end));
     if (auto m = s.child("motion")) e.motion = readMotion(*m);
@@ -462,7 +462,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
 
     {
         Section fr = root.section("frames");
-        scene.frames.fps = fr.number("fps", scene.frames.fps, "frames/s", Bounds{0, limits::kFps, true, false});
+        scene.frames.fps = fr.number("fps", scene.frames.fps, "frames/s", Bounds::positiveUpTo(limits::kFps));
         scene.frames.start = fr.integer("start", scene.frames.start, 0, 9999);
         scene.frames.end = fr.integer("end", scene.frames.end, 0, 9999);
         if (scene.frames.end < scene.frames.start)
@@ -537,15 +537,13 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
         t.fixedDt = ts.number("fixed", t.fixedDt, "s (0: adaptive CFL step)", Bounds::nonNegative());
         // A step so short that a frame takes millions of them would run for days: input, not a run-time surprise.
         const Real shortest = 1 / (scene.frames.fps * limits::kStepsPerFrame);
-        for (const char* key : {"min", "fixed"}) {
-            const Real dt = std::string(key) == "min" ? t.dtMin : t.fixedDt;
+        for (const auto& [key, dt] : {std::pair<const char*, Real>{"min", t.dtMin}, {"fixed", t.fixedDt}})
             if (dt > 0 && dt < shortest)
                 ts.fail(key, fmt::format("simulation.time_step.{} ({} s) would take up to {:.3g} steps a frame at {} "
                                          "frames/s",
                                          key, formatNumber(dt), 1 / (scene.frames.fps * dt),
                                          formatNumber(scene.frames.fps)),
                         fmt::format("give a step of at least {:.3g} s (a million steps a frame)", shortest));
-        }
         ts.rejectUnused();
         Section ps = sim.section("pressure");
         PressureSettings& p = scene.pressure;

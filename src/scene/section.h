@@ -27,6 +27,7 @@ struct Bounds {
     static Bounds positive() { return {0, std::numeric_limits<Real>::infinity(), true, false}; }
     static Bounds nonNegative() { return {0, std::numeric_limits<Real>::infinity(), false, false}; }
     static Bounds closed(Real lo, Real hi) { return {lo, hi, false, false}; }
+    static Bounds positiveUpTo(Real hi) { return {0, hi, true, false}; }  ///< (0, hi]
 };
 
 /// The largest magnitudes a scene may ask for. Beyond them the model means nothing and the quantities derived from
