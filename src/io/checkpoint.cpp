@@ -17,7 +17,7 @@ namespace ganache {
 namespace {
 
 constexpr char kMagic[8] = {'G', 'N', 'C', 'H', 'C', 'K', 'P', 'T'};
-constexpr std::uint32_t kVersion = 3;  // 2: effects save their own state; 3: the viscosity warm start's step
+constexpr std::uint32_t kVersion = 3;  // 2: effects save their own state; 3: the viscosity warm start's steps
 
 // Writing and reading share one description of the state (fields() below): the same calls on a ByteWriter append
 // each value, on a ByteReader take it back, so the two can never disagree on the order.

@@ -21,6 +21,8 @@ constexpr Real kTwoDPlus4 = 10;  // 2 (d + 2) with d = 3
 // The change of velocity of the latest pass: the warm start of the next step, and what a later coupled pass of the
 // same step takes back.
 constexpr Attribute<Vec3> kChange{"_viscosity_dv", false};
+// The step before's change: the warm start extrapolates from the two.
+constexpr Attribute<Vec3> kEarlierChange{"_viscosity_dv_earlier", false};
 
 }  // namespace
 
@@ -116,7 +118,8 @@ void ParticleViscosity::refresh(const ParticleSet& particles) {
 }
 
 ViscosityMethod::ViscosityMethod(const ViscosityParams& params, const SimulationSetup& setup, ParticleSet& particles)
-    : m_params(params), m_mu(params, setup, particles), m_dv(&particles.add(kChange)) {}
+    : m_params(params), m_mu(params, setup, particles), m_dv(&particles.add(kChange)),
+      m_earlierDv(&particles.add(kEarlierChange)) {}
 
 std::vector<Counter> ViscosityMethod::counters(std::size_t) const {
     return {{"solves", double(m_solves)},
@@ -126,11 +129,11 @@ std::vector<Counter> ViscosityMethod::counters(std::size_t) const {
 }
 
 void ViscosityMethod::save(ByteWriter& out) const {
-    out(m_solves), out(m_iterations), out(m_capHits), out(m_worstResidual), out(m_lastDt);
+    out(m_solves), out(m_iterations), out(m_capHits), out(m_worstResidual), out(m_lastDt), out(m_earlierDt);
 }
 
 void ViscosityMethod::restore(ByteReader& in) {
-    in(m_solves), in(m_iterations), in(m_capHits), in(m_worstResidual), in(m_lastDt);
+    in(m_solves), in(m_iterations), in(m_capHits), in(m_worstResidual), in(m_lastDt), in(m_earlierDt);
 }
 
 void ViscosityMethod::computeCoefficients(const StepContext& ctx, const ParticleSet& particles) {
@@ -216,18 +219,29 @@ void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
     // With coupled passes the solve runs several times a step, each on the velocity the latest pressure solve
     // left. A later pass first takes back the previous pass's change dv (a pass replaces it, it does not add a
     // second dt of viscosity) and starts from v + dv, which is the current velocity. The first pass of a step
-    // starts from v + dv with dv the previous step's change scaled by the ratio of the steps (the viscous change
-    // grows with dt): the paper's warm start, which unscaled took 29 % more CG iterations on the default scene,
-    // whose steps vary.
+    // starts from the paper's warm start v + dv, dv the previous step's change, improved twice: dv is taken per unit
+    // time (the viscous change grows with dt; unscaled, the default scene took 29 % more CG iterations) and half
+    // way extrapolated from the change of the step before (a full extrapolation overshoots where the fluid
+    // melts: default scene +19 %; half way saves 4-13 % of the iterations on the default scene and the anchors).
     const bool firstPass = !m_hasSolved || ctx.step != m_lastStep;
     m_hasSolved = true;
     m_lastStep = ctx.step;
     if (!firstPass) forEachParticle(n, [&](std::size_t i) { v[i] -= dv[i]; });
-    const bool guessWithChange = m_params.warmStart || !firstPass;
-    const Real scale = firstPass && m_lastDt > 0 ? ctx.dt / m_lastDt : 1;
-    if (firstPass) m_lastDt = ctx.dt;
     m_out.resize(n);
-    forEachParticle(n, [&](std::size_t i) { m_out[i] = guessWithChange ? Vec3(v[i] + scale * dv[i]) : v[i]; });
+    if (!firstPass || !m_params.warmStart) {
+        forEachParticle(n, [&](std::size_t i) { m_out[i] = firstPass ? v[i] : Vec3(v[i] + dv[i]); });
+    } else {
+        auto& earlier = *m_earlierDv;
+        const Real scale = m_lastDt > 0 ? ctx.dt / m_lastDt : 1;
+        // Rates dv / dt of the last two steps, r1 and r0: the guess is dt (r1 + (r1 - r0) / 2).
+        const Real ratio = m_earlierDt > 0 ? m_lastDt / m_earlierDt : 0;
+        forEachParticle(n, [&](std::size_t i) {
+            m_out[i] = v[i] + scale * (ratio > 0 ? Vec3(1.5 * dv[i] - 0.5 * ratio * earlier[i]) : dv[i]);
+            earlier[i] = dv[i];
+        });
+        m_earlierDt = m_lastDt;
+        m_lastDt = ctx.dt;
+    }
     computeCoefficients(ctx, particles);
 
     m_last = solve(ctx, particles, m_out);

@@ -149,7 +149,8 @@ private:
     std::vector<Mat3> m_fluidBlocks;
     BodyLoads m_passLoads;    // the viscous loads of the latest pass, which a later pass of the step replaces
     std::size_t m_lastStep = 0;
-    Real m_lastDt = 0;  // the step of the last first pass: scales the warm start
+    Real m_lastDt = 0, m_earlierDt = 0;  // the last two steps: scale the warm start
+    std::vector<Vec3>* m_earlierDv;       // the change of the step before the last (kEarlierChange)
     bool m_hasSolved = false;
     ViscosityPass m_last;
     // Over the run:
