@@ -114,10 +114,11 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     const bool wholeFluid = m_params.preconditioner == P::Rigid || (m_params.preconditioner == P::Clusters && !clusters);
     auto precondition = [&](const std::vector<Vec3>& r, std::vector<Vec3>& z) {
         const Vec6 coarse = wholeFluid ? Vec6(m_rigid.solve(m_rigid.project(x, r))) : Vec6::Zero();
+        // r . z in the same pass, unless the clusters' correction is still to come.
         const Real rz = deterministicSum(n, [&](std::size_t i) {
             z[i] = m_inverseDiagonal[i] * r[i];
             if (wholeFluid) z[i] += m_rigid.velocity(coarse, x[i]);
-            return r[i].dot(z[i]);
+            return clusters ? Real(0) : r[i].dot(z[i]);
         });
         if (!clusters) return rz;
         m_clusters.addCorrection(x, r, z);
