@@ -3,6 +3,7 @@
 
 #include "app/interrupt.h"
 #include "core/errors.h"
+#include "farm/farm.h"
 #include "pipeline/pipeline.h"
 #include "tools/study/study.h"
 
@@ -76,6 +77,8 @@ int main(int argc, char** argv) {
     for (std::size_t i : {std::size_t(0), std::size_t(3), std::size_t(4)})
         subs[i]->add_flag("--force", opt.force,
                           "redo surface and render frames whose outputs are newer than their inputs");
+    subs[4]->add_flag("--frames-only", opt.framesOnly,
+                      "render the frames only, no contact sheet or MP4 (a part of a range, as a farm's render task)");
     for (std::size_t i : {std::size_t(0), std::size_t(3)}) {
         subs[i]->add_option("--memory", opt.memoryGiB,
                             "GiB the run may plan for (default: 80 % of what the machine, or its cgroup, has "
@@ -108,6 +111,38 @@ int main(int argc, char** argv) {
     studyCmd->add_option("--case", study.cases, "only these cases: spinning_cube, couette, viscous_bunny");
     studyCmd->add_option("--threads", study.threads, "worker threads (default 0: every core)")->check(threadCount);
 
+    FarmOptions farm;
+    std::string farmOut;
+    CLI::App* farmCmd = app.add_subcommand(
+        "farm", "submit the scene to a Slurm cluster as a job graph: simulate, surface and render arrays over chunks of "
+                "frames, and an assemble job (batch scripts in <out>/farm/)");
+    farmCmd->add_option("scene", opt.scene, "scene file (YAML, `ganache: 1`; see scenes/README.md)");
+    farmCmd->add_option("--quality", opt.quality, "preview (default), final, or a number that multiplies the radius");
+    farmCmd->add_option("--out", opt.out,
+                        "output folder on a file system every node sees (default: out/<scene name>)");
+    farmCmd->add_option("--frames", opt.frames, "frame range A-B (or one frame A) within the scene's frames");
+    farmCmd->add_option("--chunk", farm.chunk, "frames per surface and render task (default 10)");
+    farmCmd->add_option("--partition", farm.partition, "Slurm partition (default: the cluster's default)");
+    farmCmd->add_option("--cpus", farm.cpus,
+                        "CPUs of each surface and render task (default: a node's, at most 4; the simulation takes a "
+                        "whole node's)")
+        ->check(CLI::PositiveNumber);
+    farmCmd->add_option("--sbatch", farm.sbatch,
+                        "a further sbatch option for every job, e.g. --sbatch=--account=vfx (repeatable)");
+    farmCmd->add_flag("--resume", opt.resume,
+                      "the simulate job continues from the newest valid checkpoint in the output folder (a requeued "
+                      "simulate job always does)");
+    farmCmd->add_flag("--dry-run", farm.dryRun, "write the batch scripts and print the plan; submit nothing");
+    farmCmd->add_flag("--assume-shared", farm.assumeShared,
+                      "do not refuse an output folder, scene or program on a file system local to this machine "
+                      "(when the same path holds the same files on every node)");
+    CLI::App* farmStatus =
+        farmCmd->add_subcommand("status", "which frames are done, which jobs run, wait or failed, and how to rerun a task");
+    farmStatus->add_option("out", farmOut, "the output folder the farm was submitted with")->required();
+    CLI::App* farmReport =
+        farmCmd->add_subcommand("report", "merge the tasks' reports into <out>/report.json (the assemble job does it)");
+    farmReport->add_option("out", farmOut, "the output folder the farm was submitted with")->required();
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -124,6 +159,21 @@ int main(int argc, char** argv) {
             const InterruptGuard guard;
             study.stopSignal = [] { return InterruptGuard::received(); };
             studyCommand(study);
+            return 0;
+        }
+        if (farmStatus->parsed()) {
+            farmStatusCommand(farmOut);
+            return 0;
+        }
+        if (farmReport->parsed()) {
+            farmReportCommand(farmOut);
+            return 0;
+        }
+        if (farmCmd->parsed()) {
+            if (opt.scene.empty())
+                throw InputError("ganache farm: no scene file\n  fix: `ganache farm SCENE [options]`, or `ganache farm "
+                                 "status OUT`");
+            farmSubmitCommand(opt, farm);
             return 0;
         }
         if (check) {

@@ -43,7 +43,7 @@ void RunReport::measureCount(const std::string& path, std::uint64_t value) {
 }
 
 StageRecord& RunReport::addStage(const std::string& name) {
-    m_stages.push_back({name, "done", 0, "", {}});
+    m_stages.push_back({name, "done", 0, -1, "", {}});
     return m_stages.back();
 }
 
@@ -129,7 +129,11 @@ std::string RunReport::json() const {
     j["effects_ran"] = simulated ? simulation["effects_ran"] : json::array();
     json stages = json::array();
     for (const auto& s : m_stages)
-        stages.push_back({{"name", s.name}, {"status", s.status}, {"wall_s", s.seconds}, {"note", s.note},
+        stages.push_back({{"name", s.name},
+                          {"status", s.status},
+                          {"wall_s", s.seconds},
+                          {"frames_done", s.frames >= 0 ? json(s.frames) : json(nullptr)},
+                          {"note", s.note},
                           {"outputs", s.outputs}});
     j["stages"] = stages;
     j["per_step_ms"] = simulated ? simulation["per_step_ms"] : json::object();

@@ -22,6 +22,7 @@ struct StageRecord {
     std::string name;
     std::string status;  ///< "done", "skipped" (up to date or not asked for), "not available"
     double seconds = 0;
+    std::int64_t frames = -1;  ///< frames the stage made (simulate: simulated), for costs per frame; -1: not per frame
     std::string note;
     std::vector<std::string> outputs;
 };

@@ -142,7 +142,7 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
                 runSurface(scene, layout, frames, options.force, threads, options.memoryGiB, report);
             } else {
                 requireSection("render", scene.render.requested);
-                runRender(scene, layout, frames, options.force, report);
+                runRender(scene, layout, frames, options.force, options.framesOnly, report);
             }
         }
     } catch (const Interrupted& e) {

@@ -24,6 +24,7 @@ struct RunOptions {
     std::string quality = "preview";
     bool resume = false;
     bool force = false;                              ///< redo frames whose outputs are up to date
+    bool framesOnly = false;                         ///< render: no contact sheet or video (a farm task's part)
     double memoryGiB = 0;                            ///< memory a stage may plan for; 0: what is free
     bool skipResourceCheck = false;                  ///< run even when the estimates exceed what the machine has
 };
@@ -49,6 +50,21 @@ struct OutputLayout {
     /// <out>/checkpoints/<name>.FFFF.SSSSSSS.ckpt: saved after frame F was written, at step S.
     std::filesystem::path checkpoint(std::int64_t frame, std::uint64_t step) const;
 };
+
+/// What a scene will need, estimated from the scene before anything runs (resources.cpp). The resource guard
+/// compares it with what the machine has; the farm turns it into each job's request.
+struct ResourceEstimate {
+    double fluid = 0, boundary = 0;  ///< particles
+    double programBytes = 0;         ///< memory of the program itself, before any particle
+    /// Memory on top of the program [bytes]: sample and simulate; one frame surfaced; the render stage. 0 for a
+    /// stage not asked for.
+    double simulateBytes = 0, surfaceFrameBytes = 0, renderBytes = 0;
+    /// Disk the outputs of the frame range take [bytes].
+    double sampleDisk = 0, particleDisk = 0, checkpointDisk = 0, levelSetDisk = 0, meshDisk = 0, previewDisk = 0;
+    double disk() const { return sampleDisk + particleDisk + checkpointDisk + levelSetDisk + meshDisk + previewDisk; }
+};
+ResourceEstimate estimateResources(const Scene& scene, std::pair<std::int64_t, std::int64_t> frames,
+                                   const std::vector<StageId>& stages);
 
 /// `ganache run` (every stage the scene asks for) or one stage on its own. Throws InputError for bad input,
 /// std::runtime_error for run-time failures. Progress and the closing table go to stderr.

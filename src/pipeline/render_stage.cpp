@@ -7,6 +7,7 @@
 #include "core/attributes.h"
 #include "physics/viscosity/viscosity.h"
 
+#include "app/process.h"
 #include "app/progress.h"
 #include "core/errors.h"
 #include "io/atomic_file.h"
@@ -21,7 +22,6 @@
 #include <cstdlib>
 #include <mutex>
 #include <sys/wait.h>
-#include <unistd.h>
 
 namespace ganache {
 
@@ -120,24 +120,10 @@ std::pair<std::vector<Real>, std::string> colourValues(const Scene& scene, const
     return {values, ""};
 }
 
-bool onPath(const std::string& program) {
-    const char* path = std::getenv("PATH");
-    if (!path) return false;
-    std::string dirs = path;
-    std::size_t start = 0;
-    while (start <= dirs.size()) {
-        const std::size_t end = std::min(dirs.find(':', start), dirs.size());
-        const std::filesystem::path candidate = std::filesystem::path(dirs.substr(start, end - start)) / program;
-        if (::access(candidate.c_str(), X_OK) == 0) return true;
-        start = end + 1;
-    }
-    return false;
-}
-
 }  // namespace
 
 void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
-               bool force, RunReport& report) {
+               bool force, bool framesOnly, RunReport& report) {
     StageRecord& stage = report.addStage("render");
     const RenderSettings& settings = scene.render;
     if (!settings.requested) {
@@ -253,10 +239,18 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         if (std::filesystem::exists(layout.preview(f))) stage.outputs.push_back(layout.preview(f).string());
     }
 
-    // The contact sheet and the video, made again only when a frame was rendered (or they are missing).
+    // The contact sheet and the video, made again only when one of the range's previews is newer (or they are
+    // missing); not at all for a part of a range (a farm's render task: its assemble job makes them).
     std::string sheetNote, videoNote;
     const std::int64_t count = frames.second - frames.first + 1;
-    if (settings.contactSheet > 0 && (done > 0 || !std::filesystem::exists(layout.sheet()))) {
+    auto stale = [&](const std::filesystem::path& whole) {
+        if (framesOnly) return false;
+        if (done > 0) return true;
+        for (std::int64_t f = frames.first; f <= frames.second; ++f)
+            if (!upToDate(whole, layout.preview(f))) return true;
+        return false;
+    };
+    if (settings.contactSheet > 0 && stale(layout.sheet())) {
         // Up to contact_sheet frames spread evenly over the range.
         std::vector<Image> images;
         std::vector<std::string> captions;
@@ -274,7 +268,7 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         }
     }
     // The video, from every frame of the range, when ffmpeg is there.
-    if (settings.video && !jobs.failed() && !jobs.stopped() && (done > 0 || !std::filesystem::exists(layout.video()))) {
+    if (settings.video && !jobs.failed() && !jobs.stopped() && stale(layout.video())) {
         if (!onPath("ffmpeg")) {
             videoNote = "; no MP4: ffmpeg is not installed (`apt-get install ffmpeg`)";
         } else {
@@ -298,6 +292,7 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
         }
     }
     stage.seconds = clock.seconds();
+    stage.frames = std::int64_t(done);
     stage.status = todo.empty() ? "skipped" : "done";
     stage.note = fmt::format("{} frames rendered at {}x{} ({} of them from surface meshes){}{}{}", done,
                              settings.width, settings.height, meshFrames,

@@ -99,15 +99,42 @@ double availableBytes() {
     return free;
 }
 
-void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
-                    const std::vector<StageId>& stages, double memoryGiB, bool skipCheck, RunReport& report) {
-    const double fluid = estimateFluidParticles(scene, scene.particleRadius);
-    const double boundary = estimateBoundaryParticles(scene);
+ResourceEstimate estimateResources(const Scene& scene, std::pair<std::int64_t, std::int64_t> frames,
+                                   const std::vector<StageId>& stages) {
+    ResourceEstimate e;
+    e.fluid = estimateFluidParticles(scene, scene.particleRadius);
+    e.boundary = estimateBoundaryParticles(scene);
+    e.programBytes = kProgramBytes;
     const double written = double(frames.second - frames.first + 1);
     const bool surface = has(stages, StageId::Surface) && scene.surface.requested;
     const bool render = has(stages, StageId::Render) && scene.render.requested;
     bool moving = false;
     for (const auto& b : scene.boundaries) moving |= !b.motion.isStatic();
+
+    if (has(stages, StageId::Sample) || has(stages, StageId::Simulate))
+        e.simulateBytes = kFluidBytes * e.fluid + kBoundaryBytes * e.boundary;
+    if (surface) e.surfaceFrameBytes = estimateSurfaceBytes(std::size_t(e.fluid), scene.particleRadius, scene.surface);
+    if (render) e.renderBytes = kRenderBytes + kFluidBytes * e.fluid;
+
+    if (has(stages, StageId::Sample)) e.sampleDisk = kFluidCacheBytes * e.fluid + kBoundaryCacheBytes * e.boundary;
+    if (has(stages, StageId::Simulate)) {
+        e.particleDisk = written * (kFluidCacheBytes * e.fluid + (moving ? kBoundaryCacheBytes * e.boundary : 0));
+        if (scene.checkpointEvery > 0) e.checkpointDisk = double(scene.checkpointsKept + 1) * kCheckpointBytes * e.fluid;
+    }
+    if (surface) {
+        const auto [vdb, obj] = estimateSurfaceFileBytes(std::size_t(e.fluid), scene.particleRadius, scene.surface);
+        e.levelSetDisk = written * vdb;
+        e.meshDisk = written * obj;
+    }
+    if (render)  // PNG previews compress to about 4 % of their pixels' bytes (default scene: 9.9 MiB for 96 frames)
+        e.previewDisk = (written + 1) * 0.06 * 3 * double(scene.render.width * scene.render.height);
+    return e;
+}
+
+void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
+                    const std::vector<StageId>& stages, double memoryGiB, bool skipCheck, RunReport& report) {
+    const ResourceEstimate e = estimateResources(scene, frames, stages);
+    const double fluid = e.fluid, boundary = e.boundary;
 
     // Memory the scene's data needs on top of the program, in the largest stage (they run one after the other).
     // This is what is compared with the free memory (which the running program is already not part of) or
@@ -118,31 +145,12 @@ void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<st
     auto consider = [&](double bytes, const char* stage, const Location& where, const char* remedy) {
         if (bytes > memory) memory = bytes, heaviest = stage, at = where, fix = remedy;
     };
-    if (has(stages, StageId::Sample) || has(stages, StageId::Simulate))
-        consider(kFluidBytes * fluid + kBoundaryBytes * boundary, "simulate", scene.radiusAt,
-                 "raise particles.radius or use a coarser --quality (memory grows as 1 / radius^3)");
-    if (surface)
-        consider(estimateSurfaceBytes(std::size_t(fluid), scene.particleRadius, scene.surface), "surface",
-                 scene.surface.at, "raise surface.voxel_size, or particles.radius (a coarser --quality)");
-    if (render)
-        consider(kRenderBytes + kFluidBytes * fluid, "render", scene.render.at,
-                 "render on another machine (`ganache render`)");
-
-    // Disk: what each stage writes.
-    const double sample = has(stages, StageId::Sample) ? kFluidCacheBytes * fluid + kBoundaryCacheBytes * boundary : 0;
-    double particles = 0, checkpoints = 0, levelSets = 0, meshes = 0, previews = 0;
-    if (has(stages, StageId::Simulate)) {
-        particles = written * (kFluidCacheBytes * fluid + (moving ? kBoundaryCacheBytes * boundary : 0));
-        if (scene.checkpointEvery > 0) checkpoints = double(scene.checkpointsKept + 1) * kCheckpointBytes * fluid;
-    }
-    if (surface) {
-        const auto [vdb, obj] = estimateSurfaceFileBytes(std::size_t(fluid), scene.particleRadius, scene.surface);
-        levelSets = written * vdb;
-        meshes = written * obj;
-    }
-    if (render)  // PNG previews compress to about 4 % of their pixels' bytes (default scene: 9.9 MiB for 96 frames)
-        previews = (written + 1) * 0.06 * 3 * double(scene.render.width * scene.render.height);
-    const double disk = sample + particles + checkpoints + levelSets + meshes + previews;
+    consider(e.simulateBytes, "simulate", scene.radiusAt,
+             "raise particles.radius or use a coarser --quality (memory grows as 1 / radius^3)");
+    consider(e.surfaceFrameBytes, "surface", scene.surface.at,
+             "raise surface.voxel_size, or particles.radius (a coarser --quality)");
+    consider(e.renderBytes, "render", scene.render.at, "render on another machine (`ganache render`)");
+    const double disk = e.disk();
 
     const double memoryBudget = memoryGiB > 0 ? memoryGiB * kGiB : 0.8 * availableBytes();
     const double diskFree = freeDiskBytes(layout.root) + existingBytes(layout.root);
@@ -151,7 +159,8 @@ void checkResources(const Scene& scene, const OutputLayout& layout, std::pair<st
                "scene) of {} {}; disk about {} (particles {}, checkpoints {}, level sets {}, meshes {}, previews {}) of "
                "{} free in {}\n",
                fluid, boundary, size(kProgramBytes + memory), size(kProgramBytes), size(memory), size(memoryBudget), memoryGiB > 0 ? "(--memory)" : "usable", size(disk),
-               size(sample + particles), size(checkpoints), size(levelSets), size(meshes), size(previews),
+               size(e.sampleDisk + e.particleDisk), size(e.checkpointDisk), size(e.levelSetDisk), size(e.meshDisk),
+               size(e.previewDisk),
                size(diskFree), layout.root.string());
     report.measure("plan/fluid_particles", fluid);
     report.measure("plan/boundary_particles", boundary);

@@ -161,6 +161,7 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     report.setBodies(sim.boundary().names, sim.bodyReports());
     if (const auto* emitters = sim.findEffect<Emitters>()) report.setEmitters(emitters->reports());
     stage.seconds = clock.seconds();
+    stage.frames = frames.second - (next - 1);
     const SolverStats& s = sim.stats();
     report.measureCount("checkpoints/written", checkpoints);
     report.measure("checkpoints/seconds", checkpointSeconds);

@@ -40,8 +40,8 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
 void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
                 bool force, int threads, double memoryGiB, RunReport& report);
 
-/// The render stage (render_stage.cpp).
+/// The render stage (render_stage.cpp); framesOnly leaves the contact sheet and the video alone.
 void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::int64_t, std::int64_t> frames,
-               bool force, RunReport& report);
+               bool force, bool framesOnly, RunReport& report);
 
 }  // namespace ganache

@@ -103,6 +103,7 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
     jobs.finish();
     const std::size_t done = jobs.done();
     stage.seconds = clock.seconds();
+    stage.frames = std::int64_t(done);
     stage.status = todo.empty() ? "skipped" : "done";
     stage.note = fmt::format("{} frames surfaced with method {}, voxel {} r{}{}", done, surfaceMethodName(settings.method),
                              formatNumber(settings.voxelFraction),

@@ -37,7 +37,7 @@ void writeTinyVariant(const fs::path& file, const std::string& cutAt, const std:
 
 TEST(Cli, HelpForEveryCommand) {
     EXPECT_EQ(runGanache("--help").code, 0);
-    for (const char* c : {"run", "sample", "simulate", "surface", "render", "scene"}) {  // study: its own test
+    for (const char* c : {"run", "sample", "simulate", "surface", "render", "scene", "farm"}) {  // study: its own test
         const Result r = runGanache(std::string(c) + " --help");
         EXPECT_EQ(r.code, 0) << c;
         EXPECT_NE(r.output.find("--quality"), std::string::npos) << c;
@@ -297,6 +297,29 @@ TEST(Cli, RenderWritesPreviewsAndNamesBadMeshes) {
     EXPECT_NE(report["warnings"][0].get<std::string>().find("frame 1: the camera is inside the fluid's bounds"),
               std::string::npos)
         << report["warnings"];
+}
+
+// A farm's render tasks each render a part of the range with --frames-only; the contact sheet is made once, from
+// every frame, by a render of the whole range, which does it again whenever a preview is newer than the sheet.
+TEST(Cli, RenderFramesOnlyLeavesTheSheetToTheWholeRange) {
+    const fs::path out = freshDir("frames_only");
+    const fs::path sheet = out / "preview/tiny.sheet.png";
+    ASSERT_EQ(runGanache("run " + kTiny + " --out " + out.string()).code, 0);
+    fs::remove(sheet);
+    Result r = runGanache("render " + kTiny + " --frames 1-2 --frames-only --force --out " + out.string());
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_FALSE(fs::exists(sheet)) << "a part of the range makes no sheet";
+
+    r = runGanache("render " + kTiny + " --out " + out.string());
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("5 up to date, skipped"), std::string::npos) << r.output;
+    ASSERT_TRUE(fs::exists(sheet)) << "every frame is there, the sheet is not: it is made";
+    const auto made = fs::last_write_time(sheet);
+
+    fs::last_write_time(out / "preview/tiny.0003.png", made + std::chrono::seconds(5));  // a task redid frame 3
+    r = runGanache("render " + kTiny + " --out " + out.string());
+    EXPECT_EQ(r.code, 0) << r.output;
+    EXPECT_GT(fs::last_write_time(sheet), made) << "a preview newer than the sheet makes it again";
 }
 
 TEST(Cli, BadInputExitsWithTwoAndSaysWhere) {

@@ -1,0 +1,134 @@
+#!/usr/bin/env bash
+# The farm against a real Slurm: each case starts its own one-node cluster (cluster.sh), submits tests/scenes/farm.yaml
+# through `ganache farm` and checks the outputs byte for byte against a local `ganache run` of the same scene.
+#   farm_test.sh graph|requeue|bad_input GANACHE
+#   graph      the whole job graph (simulate, 3 surface and 3 render tasks, assemble) and its merged report
+#   requeue    the simulate job requeued in the middle of its run resumes from its checkpoint, outputs unchanged
+#   bad_input  no Slurm on the PATH, a controller that does not answer, no such partition, an output folder the
+#              partition's nodes cannot see, a job no node can hold, an option sbatch refuses: clear errors, nothing
+#              submitted
+# Exit 77 (skipped) without root or without Slurm's packages (scripts/test.sh installs them).
+set -euo pipefail
+case_name=${1:?usage: farm_test.sh CASE GANACHE}
+ganache=$(realpath "${2:?usage: farm_test.sh CASE GANACHE}")
+here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+scene="$here/../scenes/farm.yaml"
+work=$(mktemp -d /tmp/ganache-farm-test.XXXXXX)
+cleanup() {
+  "$here/cluster.sh" stop "$work/cluster" >/dev/null 2>&1 || true
+  rm -rf "$work"
+}
+trap cleanup EXIT
+
+fail() {
+  echo "FAIL: $*" >&2
+  for log in "$work"/farm/farm/logs/*.log; do [ -f "$log" ] && { echo "--- $log" >&2; tail -n 15 "$log" >&2; }; done
+  exit 1
+}
+
+start_cluster() {
+  local status=0
+  "$here/cluster.sh" start "$work/cluster" >"$work/cluster.env" || status=$?
+  ((status == 0)) || exit "$status"  # 77: no root or no Slurm here
+  source "$work/cluster.env"
+}
+
+# Polls until the farm's jobs have all left the queue (a generous limit for a loaded machine; no fixed delays).
+wait_for_queue() {
+  local deadline=$((SECONDS + 600))
+  while [ -n "$(squeue -h 2>/dev/null)" ]; do
+    ((SECONDS < deadline)) || fail "the jobs did not finish within 600 s: $(squeue)"
+    sleep 0.5
+  done
+}
+
+# Every output of the local run, byte for byte (checkpoints carry the run's own timings, report.json its times).
+same_outputs() {
+  local local_out=$1 farm_out=$2 count=0
+  while IFS= read -r f; do
+    cmp -s "$local_out/$f" "$farm_out/$f" || fail "$f differs between the local run and the farm"
+    count=$((count + 1))
+  done < <(cd "$local_out" && find . -type f ! -name report.json ! -path './cache/*' ! -path './checkpoints/*' | sort)
+  for d in sample particles surface mesh preview; do
+    [ "$(ls "$local_out/$d" | wc -l)" = "$(ls "$farm_out/$d" | wc -l)" ] || fail "$d/ holds other files on the farm"
+  done
+  ((count > 40)) || fail "only $count outputs compared"
+  echo "$count outputs identical"
+}
+
+job_id() { sed -n "/\"stage\": \"$1\"/,/\"id\"/s/.*\"id\": \"\([0-9]*\)\".*/\1/p" "$work/farm/farm/farm.json"; }
+
+case "$case_name" in
+graph)
+  start_cluster
+  "$ganache" run "$scene" --out "$work/local" 2>/dev/null
+  "$ganache" farm "$scene" --out "$work/farm" --chunk 5 >"$work/submit.txt" || fail "submission: $(cat "$work/submit.txt")"
+  cat "$work/submit.txt"
+  [ "$(grep -c '^submitted' "$work/submit.txt")" = 4 ] || fail "expected 4 jobs submitted"
+  grep -q -- '--array=0-2' "$work/farm/farm/surface.sbatch" || fail "12 frames in chunks of 5 should be 3 surface tasks"
+  grep -q -- "--dependency" "$work/farm/farm/surface.sbatch" && fail "dependencies belong to the submission"
+  wait_for_queue
+  "$ganache" farm status "$work/farm" | tee "$work/status.txt"
+  grep -q '12/12 frames rendered' "$work/status.txt" || fail "status does not show every frame rendered"
+  grep -q '"status": "done"' "$work/farm/report.json" || fail "the merged report does not say done"
+  for stage in simulate surface render assemble; do
+    grep -q "\"$stage\": \"$(job_id "$stage")\"" "$work/farm/report.json" || fail "report.json lacks the $stage job id"
+  done
+  [ "$(grep -c '"report": ' "$work/farm/report.json")" = 9 ] || fail "report.json should list 9 task reports"
+  same_outputs "$work/local" "$work/farm"
+  ;;
+requeue)
+  start_cluster
+  # At half the radius the simulation takes long enough (about 0.6 s a frame on 2 cores) to be caught mid-run.
+  "$ganache" farm "$scene" --out "$work/farm" --quality 0.5 --chunk 4 >"$work/submit.txt" || fail "submission"
+  simulate=$(job_id simulate)
+  deadline=$((SECONDS + 300))
+  until [ -e "$work/farm/particles/farm.0003.vdb" ]; do
+    ((SECONDS < deadline)) || fail "frame 3 was never simulated"
+    sleep 0.1
+  done
+  [ "$(squeue -h -j "$simulate" -o %T)" = RUNNING ] || fail "the simulation ended before it could be requeued"
+  scontrol requeue "$simulate"
+  until [ "$(squeue -h -j "$simulate" -o %T)" = PENDING ]; do
+    ((SECONDS < deadline)) || fail "the requeued job never came back to the queue"
+    sleep 0.2
+  done
+  # A requeued job waits out the credential lifetime (minutes); 2 s on, its old credential no longer applies.
+  scontrol update jobid="$simulate" starttime=now+2
+  "$ganache" run "$scene" --out "$work/local" --quality 0.5 2>/dev/null
+  wait_for_queue
+  grep -q 'resumed at frame' "$work/farm/farm/reports/simulate.json" || fail "the requeued simulation did not resume"
+  grep -q 'DUE TO JOB REQUEUE' "$work"/farm/farm/logs/simulate.*.log || fail "the log does not show the requeue"
+  grep -q '"status": "done"' "$work/farm/report.json" || fail "the merged report does not say done"
+  same_outputs "$work/local" "$work/farm"
+  ;;
+bad_input)
+  expect() {  # expect EXIT-CODE TEXT COMMAND...: the command fails with that code and says TEXT
+    local code=$1 text=$2 status=0
+    shift 2
+    "$@" >"$work/out.txt" 2>&1 || status=$?
+    [ "$status" = "$code" ] || fail "$* exited $status, expected $code: $(cat "$work/out.txt")"
+    grep -qF -- "$text" "$work/out.txt" || fail "$* does not say '$text': $(cat "$work/out.txt")"
+    [ -z "$(squeue -h 2>/dev/null)" ] || fail "$* left jobs submitted"
+  }
+  mkdir -p "$work/empty"
+  expect 2 '`sbatch` is not on the PATH' env PATH="$work/empty" "$ganache" farm "$scene" --out "$work/farm"
+  start_cluster
+  good_conf=$SLURM_CONF
+  # A controller that does not answer: the same cluster's configuration with a port nobody listens on.
+  sed 's/^SlurmctldPort=.*/SlurmctldPort=9/' "$good_conf" >"$work/down.conf"
+  expect 1 'the Slurm controller does not answer' env SLURM_CONF="$work/down.conf" "$ganache" farm "$scene" --out "$work/farm"
+  expect 2 "no such partition (partitions: elsewhere, main (default))" \
+    "$ganache" farm "$scene" --out "$work/farm" --partition nosuch
+  expect 2 'they would not see it' "$ganache" farm "$scene" --out "$work/farm" --partition elsewhere
+  expect 2 'more than the largest node' "$ganache" farm "$scene" --out "$work/farm" --quality 0.04
+  expect 2 'Slurm would refuse the simulate job' "$ganache" farm "$scene" --out "$work/farm" --sbatch=--gres=nosuch:1
+  expect 2 'no farm submission here' "$ganache" farm status "$work/nothing"
+  [ ! -e "$work/farm/farm/farm.json" ] || fail "a refused submission left a plan behind"
+  ;;
+*)
+  echo "unknown case $case_name" >&2
+  exit 2
+  ;;
+esac
+echo "PASS: farm $case_name"
