@@ -449,15 +449,18 @@ double estimateSurfaceBytes(std::size_t particles, Real r, const SurfaceSettings
     return 80 * bandVoxels(particles, r, settings) + 5 * fieldVoxels + 200.0 * double(particles);
 }
 
+double estimateSurfaceTriangles(std::size_t particles, Real r, const SurfaceSettings& settings) {
+    // About two triangles per surface voxel (the band's middle layer).
+    return settings.mesh ? 2 * bandVoxels(particles, r, settings) / (2 * kHalfBand) : 0.0;
+}
+
 std::pair<double, double> estimateSurfaceFileBytes(std::size_t particles, Real r, const SurfaceSettings& settings) {
     // A level-set voxel takes about 4 bytes in the file (float values, compressed topology); each extra grid
-    // about as much again. The mesh has about two triangles per surface voxel (the band's middle layer), each
-    // about 90 bytes of OBJ text with its share of the vertices and normals. On the default scene at preview
-    // (96 frames) these give 83 MiB of level sets and 624 MiB of meshes against 61 and 583 MiB written.
-    const Real band = bandVoxels(particles, r, settings);
+    // about as much again. A triangle takes about 90 bytes of OBJ text with its share of the vertices and normals.
+    // On the default scene at preview (96 frames) these give 83 MiB of level sets and 624 MiB of meshes against 61
+    // and 583 MiB written.
     const int grids = 1 + settings.densityGrid + settings.temperatureGrid + 3 * settings.velocityGrid;
-    const Real triangles = 2 * band / (2 * kHalfBand);
-    return {4.0 * grids * band, settings.mesh ? 90.0 * triangles : 0.0};
+    return {4.0 * grids * bandVoxels(particles, r, settings), 90.0 * estimateSurfaceTriangles(particles, r, settings)};
 }
 
 Real SurfaceMesh::volume() const {

@@ -80,6 +80,9 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real particleRadius, con
 /// Bytes one frame of `particles` particles is expected to need at most (for the memory check).
 double estimateSurfaceBytes(std::size_t particles, Real particleRadius, const SurfaceSettings& settings);
 
+/// Triangles one frame's mesh is expected to have (for the render stage's memory).
+double estimateSurfaceTriangles(std::size_t particles, Real particleRadius, const SurfaceSettings& settings);
+
 /// Rough sizes of one frame's files [bytes]: the level set (with the extra grids asked for) and the OBJ mesh (0
 /// without `mesh`). For the disk estimate printed before a run.
 std::pair<double, double> estimateSurfaceFileBytes(std::size_t particles, Real particleRadius,

@@ -35,6 +35,14 @@ int main(int argc, char** argv) {
                        : fmt::format("must be 0 (every core) or a positive whole number (got '{}')", text);
         },
         "");
+    const CLI::Validator positive(
+        [](std::string& text) {
+            long long v = 0;
+            return CLI::detail::lexical_cast(text, v) && v > 0
+                       ? std::string()
+                       : fmt::format("must be a positive whole number (got '{}')", text);
+        },
+        "");
     auto addRunArgs = [&](CLI::App* c) {
         addSceneArgs(c);
         c->add_option("--out", opt.out, "output folder (default: out/<scene name>)");
@@ -121,14 +129,15 @@ int main(int argc, char** argv) {
     farmCmd->add_option("--out", opt.out,
                         "output folder on a file system every node sees (default: out/<scene name>)");
     farmCmd->add_option("--frames", opt.frames, "frame range A-B (or one frame A) within the scene's frames");
-    farmCmd->add_option("--chunk", farm.chunk, "frames per surface and render task (default 10)");
+    farmCmd->add_option("--chunk", farm.chunk, "frames per surface and render task (default 10)")->check(positive);
     farmCmd->add_option("--partition", farm.partition, "Slurm partition (default: the cluster's default)");
     farmCmd->add_option("--cpus", farm.cpus,
                         "CPUs of each surface and render task (default: a node's, at most 4; the simulation takes a "
                         "whole node's)")
-        ->check(CLI::PositiveNumber);
+        ->check(positive);
     farmCmd->add_option("--sbatch", farm.sbatch,
-                        "a further sbatch option for every job, e.g. --sbatch=--account=vfx (repeatable)");
+                        "a further sbatch option for every job, e.g. --sbatch=--account=vfx (repeatable)")
+        ->allow_extra_args(false);
     farmCmd->add_flag("--resume", opt.resume,
                       "the simulate job continues from the newest valid checkpoint in the output folder (a requeued "
                       "simulate job always does)");

@@ -13,7 +13,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <fstream>
 #include <optional>
 
@@ -113,8 +112,8 @@ std::map<std::string, double> measuredCosts(const fs::path& report, const std::s
         const double threads = std::max(1.0, r.value("threads", 1.0));
         for (const Json& s : r.at("stages")) {
             const auto& frames = s.at("frames_done");
-            if (s.at("status") == "done" && frames.is_number() && frames.get<double>() > 0)
-                costs[s.at("name")] = threads * s.at("wall_s").get<double>() / frames.get<double>();
+            if (s.at("status") == "done" && frames.is_number() && frames.get<double>() > 0)  // a farm's: its tasks'
+                costs[s.at("name")] = s.value("threads", threads) * s.at("wall_s").get<double>() / frames.get<double>();
         }
     } catch (const std::exception&) {  // an unreadable or older report measures nothing
         costs.clear();
@@ -421,14 +420,7 @@ void farmStatusCommand(const fs::path& out) {
     for (const FarmJob& j : plan.jobs) {
         std::map<std::string, int> counts;  // an array's tasks by state
         for (const auto& [id, state] : queue)
-            if (id == j.id || id.rfind(j.id + "_", 0) == 0) {
-                // "12_[3-7]": tasks 3 to 7, still pending as one entry
-                const std::size_t open = id.find('['), dash = id.find('-', open), close = id.find(']', open);
-                int n = 1;
-                if (open != std::string::npos && dash != std::string::npos && close != std::string::npos)
-                    n = std::atoi(id.c_str() + dash + 1) - std::atoi(id.c_str() + open + 1) + 1;
-                counts[state] += std::max(n, 1);
-            }
+            if (id == j.id || id.rfind(j.id + "_", 0) == 0) ++counts[state];
         std::vector<std::string> states;
         for (const auto& [state, n] : counts)
             states.push_back(j.tasks ? fmt::format("{} task(s) {}", n, state) : state);
@@ -448,9 +440,14 @@ void farmStatusCommand(const fs::path& out) {
         fmt::print("  {:<9} job {:<8} {}; {}\n", j.stage, j.id.empty() ? "(dry run)" : j.id, done,
                    states.empty() ? std::string("not in the queue") : joinNames(states));
 
-        // Failed tasks, from their own reports: each can be rerun alone (frames already done are skipped).
+        // Failed tasks, from their own reports, unless Slurm runs them again: each can be rerun alone (frames
+        // already done are skipped).
         const fs::path reports = plan.root / "farm" / "reports";
+        auto queued = [&](std::int64_t k) {
+            return queue.count(j.id) || queue.count(fmt::format("{}_{}", j.id, k));
+        };
         for (std::int64_t k = 0; k < std::max<std::int64_t>(j.tasks, 1); ++k) {
+            if (queued(k)) continue;
             const std::string name = j.tasks ? fmt::format("{}.{}.json", j.stage, chunkRange(plan, k)) : j.stage + ".json";
             std::ifstream in(reports / name);
             if (!in) continue;
@@ -508,10 +505,10 @@ void farmReportCommand(const fs::path& out) {
         return r;
     };
     // One stage record from its tasks' records of it: times and frames add up.
-    auto addStage = [&](const std::string& name, const std::vector<Json>& records) {
+    auto addStage = [&](const std::string& name, const std::vector<Json>& records, int threads) {
         if (records.empty()) return;
-        Json s = {{"name", name}, {"status", "done"}, {"wall_s", 0.0}, {"frames_done", nullptr}, {"note", ""},
-                  {"outputs", Json::array()}};
+        Json s = {{"name", name}, {"status", "done"}, {"wall_s", 0.0},        {"threads", threads},
+                  {"frames_done", nullptr}, {"note", ""}, {"outputs", Json::array()}};
         std::int64_t frames = 0;
         bool counted = false;
         for (const Json& r : records) {
@@ -535,8 +532,8 @@ void farmReportCommand(const fs::path& out) {
     const FarmJob* simulate = plan.find("simulate");
     const auto sample = read("sample", simulate->id, "", "sample.json");
     const auto simulation = read("simulate", simulate->id, fmt::format("{}-{}", plan.first, plan.last), "simulate.json");
-    addStage("sample", stageOf(sample, "sample"));
-    addStage("simulate", stageOf(simulation, "simulate"));
+    addStage("sample", stageOf(sample, "sample"), simulate->cpus);
+    addStage("simulate", stageOf(simulation, "simulate"), simulate->cpus);
     for (const char* stage : {"surface", "render"}) {
         const FarmJob* job = plan.find(stage);
         if (!job) continue;
@@ -546,13 +543,13 @@ void farmReportCommand(const fs::path& out) {
             const auto r = read(stage, fmt::format("{}_{}", job->id, k), frames, fmt::format("{}.{}.json", stage, frames));
             for (const Json& s : stageOf(r, stage)) records.push_back(s);
         }
-        addStage(stage, records);
+        addStage(stage, records, job->cpus);
     }
     if (plan.find("render")) {
         const auto r = read("assemble", plan.find("assemble")->id, "", "assemble.json");
         std::vector<Json> records = stageOf(r, "render");
         if (!records.empty()) records.front()["name"] = "assemble";
-        addStage("assemble", records);
+        addStage("assemble", records, plan.find("assemble")->cpus);
     }
 
     // The simulation's report carries the scene, its settings and the solver's figures; the rest is the farm's.

@@ -121,7 +121,7 @@ void cancel(const std::vector<std::string>& jobIds) {
 std::map<std::string, std::string> queue(const std::vector<std::string>& jobIds) {
     std::map<std::string, std::string> out;
     if (jobIds.empty()) return out;
-    const ProcessResult r = call({"squeue", "-h", "-j", fmt::format("{}", fmt::join(jobIds, ",")), "-o", "%i|%T|%r"});
+    const ProcessResult r = call({"squeue", "-h", "-r", "-j", fmt::format("{}", fmt::join(jobIds, ",")), "-o", "%i|%T|%r"});
     // A job the controller has forgotten (finished long ago) makes squeue fail with "Invalid job id".
     if (r.exitCode != 0 && r.err.find("Invalid job id") == std::string::npos)
         throw std::runtime_error(fmt::format("`squeue` failed: {}", r.message()));

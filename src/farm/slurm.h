@@ -41,8 +41,8 @@ std::string testSubmit(const std::vector<std::string>& args, const std::string& 
 /// Cancels jobs (errors ignored: used to take back a graph submitted in part).
 void cancel(const std::vector<std::string>& jobIds);
 
-/// Jobs of `jobIds` still known to the controller, by id ("12", or "12_3" for an array task; pending array tasks
-/// may show as "12_[3-7]"): "STATE" or "STATE (reason)". std::runtime_error when the controller does not answer.
+/// Jobs of `jobIds` still in the queue, by id ("12", or "12_3" for task 3 of an array): "STATE" or
+/// "STATE (reason)". std::runtime_error when the controller does not answer.
 std::map<std::string, std::string> queue(const std::vector<std::string>& jobIds);
 
 }  // namespace ganache::slurm

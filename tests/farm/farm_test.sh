@@ -76,6 +76,33 @@ graph)
   done
   [ "$(grep -c '"report": ' "$work/farm/report.json")" = 9 ] || fail "report.json should list 9 task reports"
   same_outputs "$work/local" "$work/farm"
+
+  # A task that fails is named by `status` with the command that reruns it alone; rerun, a task redoes only what is
+  # missing or out of date.
+  printf 'v 0 0 0\nv 1 0 0\nf 1 2 3\n' >"$work/farm/mesh/farm.0007.obj"
+  sbatch -Q --array=1 "$work/farm/farm/render.sbatch"
+  wait_for_queue
+  "$ganache" farm status "$work/farm" >"$work/status.txt"
+  grep -q "not done: render frames 6-10: failed: render: frame 7: .*farm.0007.obj:3" "$work/status.txt" ||
+    fail "status does not name the failed render task: $(cat "$work/status.txt")"
+  grep -qF "rerun: sbatch --array=1 $work/farm/farm/render.sbatch" "$work/status.txt" || fail "no rerun command"
+  rm "$work/farm/mesh/farm.0007.obj"
+  sbatch -Q --array=1 "$work/farm/farm/surface.sbatch"
+  wait_for_queue
+  sbatch -Q --array=1 "$work/farm/farm/render.sbatch"
+  wait_for_queue
+  "$ganache" farm status "$work/farm" >"$work/status.txt"
+  grep -q "not done" "$work/status.txt" && fail "the rerun task did not mend the frame: $(cat "$work/status.txt")"
+  grep -q '"frames_done": 1,' "$work/farm/farm/reports/surface.6-10.json" || fail "the rerun redid more than frame 7"
+  same_outputs "$work/local" "$work/farm"
+
+  # Time limits from measured costs: the farm's merged report, and a local run's, both give them.
+  for out in "$work/farm" "$work/local"; do
+    "$ganache" farm "$scene" --out "$out" --chunk 5 --dry-run >"$work/plan.txt"
+    [ "$(grep -c 'min (measured)' "$work/plan.txt")" = 3 ] || fail "no measured time limits: $(cat "$work/plan.txt")"
+    grep -q -- '--time=' "$out/farm/simulate.sbatch" || fail "the simulate script has no time limit"
+  done
+  [ -z "$(squeue -h)" ] || fail "a dry run submitted jobs"
   ;;
 requeue)
   start_cluster
