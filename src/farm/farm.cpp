@@ -27,7 +27,8 @@ using Json = nlohmann::ordered_json;
 namespace {
 
 constexpr double kMiB = 1 << 20;
-// Seconds before its time limit that the simulate job is told to stop (Slurm's --signal): a step and a checkpoint.
+// Seconds before its time limit that the simulate job is warned (Slurm's --signal): time for a step, a checkpoint
+// and the requeue.
 constexpr int kStopWarningSeconds = 180;
 // Measured time limits: twice the measured cost, plus this for starting up and reading inputs.
 constexpr double kLimitMarginSeconds = 600;
@@ -125,7 +126,7 @@ FarmPlan planFarm(const RunOptions& run, const FarmOptions& options, const Scene
                   std::pair<std::int64_t, std::int64_t> frames, const slurm::Partition& partition) {
     FarmPlan plan;
     plan.exe = fs::read_symlink("/proc/self/exe");
-    plan.scene = fs::absolute(run.scene);
+    plan.scene = fs::absolute(run.scene).lexically_normal();
     plan.root = fs::absolute(run.out.empty() ? fs::path("out") / scene.name : run.out).lexically_normal();
     plan.quality = run.quality;
     plan.sceneName = scene.name;
@@ -194,7 +195,7 @@ std::vector<std::string> scriptOptions(const FarmPlan& plan, const FarmJob& job,
     if (job.stage == "simulate") {
         o.push_back("--requeue");
         o.push_back("--open-mode=append");  // a requeued run adds to its log
-        o.push_back(fmt::format("--signal=B:TERM@{}", kStopWarningSeconds));
+        o.push_back(fmt::format("--signal=B:USR1@{}", kStopWarningSeconds));
     }
     o.insert(o.end(), options.sbatch.begin(), options.sbatch.end());
     return o;
@@ -222,9 +223,18 @@ std::string scriptText(const FarmPlan& plan, const FarmJob& job, const FarmOptio
                          "resume=--resume; fi\n",
                          resume ? "--resume" : "");
         s += fmt::format("\"$ganache\" sample {} {} --report {}/sample.json\n", common, threads, reports);
-        // exec: ganache itself gets Slurm's TERM and stops at the next step with a checkpoint.
-        s += fmt::format("exec \"$ganache\" simulate {} --frames {}-{} {} $resume --report {}/simulate.json\n", common,
-                         plan.first, plan.last, threads, reports);
+        s += fmt::format(
+            "# Slurm warns this shell {0} s before the time limit (USR1): ganache stops after its current step with a "
+            "checkpoint\n# and the job requeues itself, so that a long simulation goes on in a new allocation. "
+            "Slurm's own TERM\n# (scancel, scontrol requeue, preemption) reaches ganache directly; the shell lets it "
+            "pass.\nrequeue=0\ntrap 'requeue=1; kill -TERM \"$pid\" 2>/dev/null' USR1\ntrap 'true' TERM\n"
+            "\"$ganache\" simulate {1} --frames {2}-{3} {4} $resume --report {5}/simulate.json &\npid=$!\n"
+            "while true; do  # a trapped signal ends `wait` early\n  status=0\n  wait \"$pid\" || status=$?\n"
+            "  kill -0 \"$pid\" 2>/dev/null || break\ndone\n"
+            "if [ \"$requeue\" = 1 ] && [ \"$status\" = 143 ]; then\n"
+            "  echo \"ganache farm: stopped before the time limit with a checkpoint; requeued to go on from it\" >&2\n"
+            "  exec scontrol requeue \"$SLURM_JOB_ID\"\nfi\nexit \"$status\"\n",
+            kStopWarningSeconds, common, plan.first, plan.last, threads, reports);
     } else if (job.stage == "surface") {
         s += fmt::format("exec \"$ganache\" surface {} --frames \"$first-$last\" {} --memory {:.3f} "
                          "--report {}/surface.\"$first-$last\".json\n",
@@ -317,6 +327,20 @@ void farmSubmitCommand(const RunOptions& run, const FarmOptions& options) {
     slurm::requireController();
     const slurm::Partition partition = slurm::partition(options.partition);
     const FarmPlan plan = planFarm(run, options, scene, frames, partition);
+    if (fs::exists(planFile(plan.root))) {  // two graphs must not write one folder at once
+        std::vector<std::string> earlier;
+        for (const FarmJob& j : readPlan(plan.root).jobs)
+            if (!j.id.empty()) earlier.push_back(j.id);
+        if (const auto queued = slurm::queue(earlier); !queued.empty()) {
+            std::vector<std::string> ids;
+            for (const auto& [id, state] : queued) ids.push_back(id);
+            throw InputError(fmt::format(
+                "ganache farm: jobs of an earlier submission into {} are still in the queue ({})\n  fix: wait for "
+                "them (`ganache farm status {}`), or cancel them (`scancel {}`) and submit again (--resume continues "
+                "the simulation from its newest checkpoint)",
+                plan.root.string(), joinNames(ids), plan.root.string(), fmt::join(earlier, " ")));
+        }
+    }
 
     // Every job reads the scene and the program and writes the output folder: on another node they must be there.
     std::vector<std::string> others;
@@ -457,10 +481,16 @@ void farmStatusCommand(const fs::path& out) {
                 if (status == "done") continue;
                 std::string why = r.at("result").at("error");
                 why = why.substr(0, why.find('\n'));
-                failures.push_back(fmt::format("{} {}{}: {}: {}\n    rerun: sbatch{} {}", j.stage, j.tasks ? "frames " : "",
-                                               j.tasks ? chunkRange(plan, k) : "", status, why,
-                                               j.tasks ? fmt::format(" --array={}", k) : "",
-                                               j.script(plan.root).string()));
+                // The jobs after a failed simulation wait for good (Slurm never re-tests a failed dependency).
+                const std::string rerun =
+                    j.stage == "simulate"
+                        ? fmt::format("scancel {}; ganache farm {} --out {} --quality {} --frames {}-{} --resume",
+                                      fmt::join(ids, " "), plan.scene.string(), plan.root.string(), plan.quality,
+                                      plan.first, plan.last)
+                        : fmt::format("sbatch{} {}", j.tasks ? fmt::format(" --array={}", k) : "",
+                                      j.script(plan.root).string());
+                failures.push_back(fmt::format("{} {}{}: {}: {}\n    rerun: {}", j.stage, j.tasks ? "frames " : "",
+                                               j.tasks ? chunkRange(plan, k) : "", status, why, rerun));
             } catch (const std::exception&) {
             }
         }

@@ -122,10 +122,30 @@ requeue)
   done
   # A requeued job waits out the credential lifetime (minutes); 2 s on, its old credential no longer applies.
   scontrol update jobid="$simulate" starttime=now+2
+
+  # Then the warning Slurm gives before a time limit (USR1 to the batch shell; sent by hand here, since Slurm's own
+  # timing is loose): the job stops with a checkpoint and requeues itself.
+  until [ -e "$work/farm/particles/farm.0007.vdb" ]; do
+    ((SECONDS < deadline)) || fail "frame 7 was never simulated"
+    sleep 0.1
+  done
+  scontrol show job "$simulate" | grep -q 'Restarts=1' || fail "frame 7 should come from the requeued run"
+  scancel --batch --signal=USR1 "$simulate"
+  until scontrol show job "$simulate" | grep -q 'JobState=PENDING.*\|Restarts=2'; do
+    ((SECONDS < deadline)) || fail "the job did not requeue itself: $(scontrol show job "$simulate")"
+    sleep 0.2
+  done
+  until [ "$(squeue -h -j "$simulate" -o %T)" = PENDING ]; do
+    ((SECONDS < deadline)) || fail "the job requeued by itself never came back to the queue"
+    sleep 0.2
+  done
+  scontrol update jobid="$simulate" starttime=now+2
   "$ganache" run "$scene" --out "$work/local" --quality 0.5 2>/dev/null
   wait_for_queue
   grep -q 'resumed at frame' "$work/farm/farm/reports/simulate.json" || fail "the requeued simulation did not resume"
   grep -q 'DUE TO JOB REQUEUE' "$work"/farm/farm/logs/simulate.*.log || fail "the log does not show the requeue"
+  grep -q 'requeued to go on from it' "$work"/farm/farm/logs/simulate.*.log ||
+    fail "the log does not show the job requeueing itself"
   grep -q '"status": "done"' "$work/farm/report.json" || fail "the merged report does not say done"
   same_outputs "$work/local" "$work/farm"
   ;;
@@ -152,6 +172,36 @@ bad_input)
   expect 2 'Slurm would refuse the simulate job' "$ganache" farm "$scene" --out "$work/farm" --sbatch=--gres=nosuch:1
   expect 2 'no farm submission here' "$ganache" farm status "$work/nothing"
   [ ! -e "$work/farm/farm/farm.json" ] || fail "a refused submission left a plan behind"
+
+  # sbatch refuses the third job: the two already submitted are cancelled.
+  mkdir -p "$work/bin"
+  cat >"$work/bin/sbatch" <<FAKE
+#!/bin/bash
+if [[ " \$* " != *" --test-only "* ]] && [ "\$(ls "$work/bin" | grep -c '^submitted')" = 2 ]; then
+  echo "sbatch: error: Batch job submission failed: refused by the test" >&2
+  exit 1
+fi
+[[ " \$* " == *" --test-only "* ]] || touch "$work/bin/submitted.\$RANDOM\$RANDOM"
+exec $(command -v sbatch) "\$@"
+FAKE
+  chmod +x "$work/bin/sbatch"
+  PATH="$work/bin:$PATH" "$ganache" farm "$scene" --out "$work/farm" >"$work/out.txt" 2>&1 && fail "a refused job went unnoticed"
+  grep -q 'refused by the test' "$work/out.txt" || fail "sbatch's refusal is not shown: $(cat "$work/out.txt")"
+  grep -q 'were cancelled: nothing is left submitted' "$work/out.txt" || fail "no word of the cancelled jobs"
+  deadline=$((SECONDS + 60))
+  until [ -z "$(squeue -h)" ]; do
+    ((SECONDS < deadline)) || fail "the jobs submitted before the refusal are still queued: $(squeue)"
+    sleep 0.2
+  done
+
+  # A graph still queued (here: told to wait an hour) keeps a second one out of its folder.
+  "$ganache" farm "$scene" --out "$work/farm" --sbatch=--begin=now+3600 >/dev/null || fail "a graph held for an hour"
+  queued=$(squeue -h | wc -l)
+  status=0
+  "$ganache" farm "$scene" --out "$work/farm" >"$work/out.txt" 2>&1 || status=$?
+  [ "$status" = 2 ] && grep -q 'are still in the queue' "$work/out.txt" ||
+    fail "a second graph into a busy folder: exit $status: $(cat "$work/out.txt")"
+  [ "$(squeue -h | wc -l)" = "$queued" ] || fail "the second graph submitted jobs"
   ;;
 *)
   echo "unknown case $case_name" >&2
