@@ -196,12 +196,12 @@ FAKE
 
   # A graph still queued (here: told to wait an hour) keeps a second one out of its folder.
   "$ganache" farm "$scene" --out "$work/farm" --sbatch=--begin=now+3600 >/dev/null || fail "a graph held for an hour"
-  queued=$(squeue -h | wc -l)
+  queued=$(squeue -h -r | wc -l)
   status=0
   "$ganache" farm "$scene" --out "$work/farm" >"$work/out.txt" 2>&1 || status=$?
   [ "$status" = 2 ] && grep -q 'are still in the queue' "$work/out.txt" ||
     fail "a second graph into a busy folder: exit $status: $(cat "$work/out.txt")"
-  [ "$(squeue -h | wc -l)" = "$queued" ] || fail "the second graph submitted jobs"
+  [ "$(squeue -h -r | wc -l)" = "$queued" ] || fail "the second graph submitted jobs: $(squeue)"
   ;;
 *)
   echo "unknown case $case_name" >&2
