@@ -6,13 +6,16 @@
 // frame added on top of its particles.
 // Run one benchmark per process for honest memory peaks, e.g.
 //   build/benchmarks/surface_bench --benchmark_counters_tabular=true --benchmark_filter='surface/2/200000/2'
+// meshFile: writing and reading a frame's mesh as OBJ or binary PLY (--benchmark_filter=meshFile).
 
 #include "surfacer/surfacer.h"
 
 #include <benchmark/benchmark.h>
 #include <tbb/global_control.h>
 
+#include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <random>
 #include <string>
@@ -89,7 +92,37 @@ void surface(benchmark::State& state) {
     state.counters["estimate_MB"] = estimateSurfaceBytes(fluid.size(), kRadius, settings) / 1e6;
 }
 
+// Writing and reading one frame's mesh as OBJ text or binary PLY: the 200k puddle's smooth-spheres surface.
+void meshFile(benchmark::State& state) {
+    const bool ply = state.range(0) == 1;
+    SurfaceSettings settings;
+    settings.requested = true;
+    settings.method = SurfaceMethod::SmoothSpheres;
+    static const FrameSurface frame = surfaceParticles(puddle(200'000), kRadius, settings);
+    const std::filesystem::path file =
+        std::filesystem::temp_directory_path() / (ply ? "ganache_bench_mesh.ply" : "ganache_bench_mesh.obj");
+    double write = 0, read = 0;
+    for (auto _ : state) {
+        auto t0 = std::chrono::steady_clock::now();
+        writeSurfaceMesh(file, frame.mesh(), "benchmark");
+        auto t1 = std::chrono::steady_clock::now();
+        benchmark::DoNotOptimize(readSurfaceMesh(file));
+        auto t2 = std::chrono::steady_clock::now();
+        write += std::chrono::duration<double>(t1 - t0).count();
+        read += std::chrono::duration<double>(t2 - t1).count();
+    }
+    const double frames = double(state.iterations());
+    state.counters["triangles"] = double(frame.mesh().triangles.size());
+    state.counters["file_MB"] = double(std::filesystem::file_size(file)) / 1e6;
+    state.counters["write_ms"] = 1e3 * write / frames;
+    state.counters["read_ms"] = 1e3 * read / frames;
+    std::filesystem::remove(file);
+}
+
 }  // namespace
+
+// Arguments: format (0 OBJ, 1 binary PLY).
+BENCHMARK(meshFile)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(5);
 
 // Arguments: method (0 spheres, 1 smooth_spheres, 2 anisotropic; SurfaceMethod's order), particles, threads.
 BENCHMARK(surface)

@@ -109,14 +109,17 @@ SurfaceMesh readObj(const std::filesystem::path& path) {
         }
         mesh.triangles.push_back(t);
     }
-    if (!withNormals) {  // area-weighted from the faces
-        for (const auto& t : mesh.triangles) {
-            const Vec3 n = (mesh.points[t[1]] - mesh.points[t[0]]).cross(mesh.points[t[2]] - mesh.points[t[0]]);
-            for (std::uint32_t v : t) mesh.normals[v] += n;
-        }
-        for (auto& n : mesh.normals) n = n.norm() > 0 ? Vec3(n.normalized()) : Vec3(0, 1, 0);
-    }
+    if (!withNormals) mesh.normalsFromFaces();
     return mesh;
+}
+
+void SurfaceMesh::normalsFromFaces() {
+    normals.assign(points.size(), Vec3::Zero());
+    for (const auto& t : triangles) {
+        const Vec3 n = (points[t[1]] - points[t[0]]).cross(points[t[2]] - points[t[0]]);
+        for (std::uint32_t v : t) normals[v] += n;
+    }
+    for (auto& n : normals) n = n.norm() > 0 ? Vec3(n.normalized()) : Vec3(0, 1, 0);
 }
 
 }  // namespace ganache

@@ -31,6 +31,8 @@ struct SurfaceMesh {
     std::vector<std::array<std::uint32_t, 3>> triangles;  ///< counter-clockwise seen from outside
     std::vector<float> temperature;                     ///< per vertex, when asked for [C]
 
+    /// Sets the vertex normals to the area-weighted normals of the faces around each vertex.
+    void normalsFromFaces();
     /// Enclosed volume (divergence theorem) [m^3]; meaningful for closed meshes.
     Real volume() const;
     /// Edges used by exactly one triangle and by more than two; both zero for a closed manifold mesh.
@@ -96,5 +98,17 @@ void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const 
 /// Reads a triangle OBJ as writeObj writes it (normals and temperatures optional; normals from the faces when
 /// absent). InputError naming the file and line when it is missing or malformed.
 SurfaceMesh readObj(const std::filesystem::path& path);
+
+/// Writes a binary little-endian PLY atomically: per vertex float x y z nx ny nz (and `temperature` [C] when the
+/// mesh has them), triangles as `vertex_indices` lists; `header` goes in comment lines.
+void writePly(const std::filesystem::path& path, const SurfaceMesh& mesh, const std::string& header);
+
+/// Reads a binary little-endian triangle PLY (properties in any order and of any scalar type; normals from the
+/// faces when absent). InputError naming the file when it is missing or malformed.
+SurfaceMesh readPly(const std::filesystem::path& path);
+
+/// writePly for a path ending in .ply, else writeObj; readSurfaceMesh likewise.
+void writeSurfaceMesh(const std::filesystem::path& path, const SurfaceMesh& mesh, const std::string& header);
+SurfaceMesh readSurfaceMesh(const std::filesystem::path& path);
 
 }  // namespace ganache

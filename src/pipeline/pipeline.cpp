@@ -33,7 +33,7 @@ std::filesystem::path OutputLayout::surface(std::int64_t frame) const {
 }
 
 std::filesystem::path OutputLayout::mesh(std::int64_t frame) const {
-    return root / "mesh" / fmt::format("{}.{:04}.obj", name, frame);
+    return root / "mesh" / fmt::format("{}.{:04}.{}", name, frame, meshExtension);
 }
 
 std::pair<std::int64_t, std::int64_t> parseFrameRange(const std::string& text, const FrameRange& scene) {
@@ -84,7 +84,7 @@ void runCommand(const RunOptions& options, const std::vector<StageId>& stages) {
     const int threads = options.threads > 0 ? options.threads : tbb::info::default_concurrency();
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
     const OutputLayout layout{options.out.empty() ? std::filesystem::path("out") / scene.name : options.out,
-                              scene.name};
+                              scene.name, scene.surface.meshPly ? "ply" : "obj"};
     prepareOutputFolder(layout.root, "--out");
     const std::filesystem::path reportFile = options.report.empty() ? layout.report() : options.report;
     if (!options.report.empty()) prepareOutputFolder(std::filesystem::absolute(reportFile).parent_path(), "--report");

@@ -37,11 +37,12 @@ std::pair<std::int64_t, std::int64_t> parseFrameRange(const std::string& text, c
 struct OutputLayout {
     std::filesystem::path root;
     std::string name;
+    std::string meshExtension = "obj";  ///< the scene's surface.mesh_format
     std::filesystem::path sample() const { return root / "sample" / (name + ".vdb"); }
     std::filesystem::path sampleCache() const { return root / "cache"; }  ///< sampled mesh inputs, by key
     std::filesystem::path particles(std::int64_t frame) const;
     std::filesystem::path surface(std::int64_t frame) const;  ///< <out>/surface/<name>.NNNN.vdb
-    std::filesystem::path mesh(std::int64_t frame) const;     ///< <out>/mesh/<name>.NNNN.obj
+    std::filesystem::path mesh(std::int64_t frame) const;     ///< <out>/mesh/<name>.NNNN.obj (or .ply)
     std::filesystem::path preview(std::int64_t frame) const;  ///< <out>/preview/<name>.NNNN.png
     std::filesystem::path sheet() const { return root / "preview" / (name + ".sheet.png"); }
     std::filesystem::path video() const { return root / "preview" / (name + ".mp4"); }

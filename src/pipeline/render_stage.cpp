@@ -189,7 +189,7 @@ void runRender(const Scene& scene, const OutputLayout& layout, std::pair<std::in
                 throw InputError(fmt::format("{}: no surface mesh for this frame\n  fix: run `ganache surface {} "
                                              "--frames {}`, or render with `view: auto`",
                                              layout.mesh(f).string(), scene.file.string(), f));
-            SurfaceMesh surface = readObj(layout.mesh(f));
+            SurfaceMesh surface = readSurfaceMesh(layout.mesh(f));
             if (surface.triangles.empty() && !cache.fluid.empty())
                 notes.push_back(fmt::format("frame {}: the preview shows no fluid: the surface mesh of its {} fluid "
                                             "particle(s) is empty (see the surface stage's warning); render with "

@@ -76,10 +76,12 @@ void runSurface(const Scene& scene, const OutputLayout& layout, std::pair<std::i
             surface.writeVdb(layout.surface(f), scene.name, f);
             if (settings.mesh) {
                 std::filesystem::create_directories(layout.mesh(f).parent_path());
-                writeObj(layout.mesh(f), surface.mesh(),
+                writeSurfaceMesh(layout.mesh(f), surface.mesh(),
                          fmt::format("ganache {} frame {} (t = {:.4f} s): {} particles\nunits: metres; y up{}",
                                      scene.name, f, cache.info.time, cache.fluid.size(),
-                                     surface.mesh().temperature.empty() ? "" : "; vt u = temperature [C] per vertex"));
+                                     surface.mesh().temperature.empty() ? ""
+                                     : settings.meshPly                  ? "; vertex property temperature [C]"
+                                                                         : "; vt u = temperature [C] per vertex"));
             }
             const std::lock_guard<std::mutex> guard(lock);
             if (surface.activeVoxels() == 0 && !cache.fluid.empty())

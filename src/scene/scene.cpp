@@ -345,6 +345,7 @@ SurfaceSettings readSurface(Section s, const Scene& scene) {
     out.voxelFraction = s.number("voxel_size", out.voxelFraction, "x particle radius", Bounds::closed(0.1, 2));
     out.smoothing = s.integer("smoothing", out.smoothing, 0, 50);
     out.mesh = s.boolean("mesh", out.mesh);
+    out.meshPly = s.choice("mesh_format", "obj", {"obj", "ply"}) == "ply";
     out.adaptivity = s.number("adaptivity", out.adaptivity, "", Bounds::closed(0, 1));
     Section grids = s.section("grids");
     out.densityGrid = grids.boolean("density", false);

@@ -114,7 +114,8 @@ struct SurfaceSettings {
     SurfaceMethod method = SurfaceMethod::Anisotropic;
     Real voxelFraction = 0.5;        ///< voxel size / particle radius
     std::int64_t smoothing = 2;      ///< mean-curvature smoothing iterations of the level set
-    bool mesh = true;                ///< write mesh/<scene>.####.obj
+    bool mesh = true;                ///< write mesh/<scene>.####.obj (or .ply)
+    bool meshPly = false;            ///< binary PLY meshes instead of OBJ text
     Real adaptivity = 0;             ///< VolumeToMesh adaptivity in [0, 1]: 0 keeps every polygon
     bool densityGrid = false;        ///< extra grid `density` (fog volume, 0 outside to 1 deep inside)
     bool temperatureGrid = false;    ///< extra grid `temperature` [C]

@@ -4,6 +4,7 @@
 #include "io/particle_cache.h"
 
 #include "render/render.h"
+#include "surfacer/surfacer.h"
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
@@ -320,6 +321,22 @@ TEST(Cli, RenderFramesOnlyLeavesTheSheetToTheWholeRange) {
     r = runGanache("render " + kTiny + " --out " + out.string());
     EXPECT_EQ(r.code, 0) << r.output;
     EXPECT_GT(fs::last_write_time(sheet), made) << "a preview newer than the sheet makes it again";
+}
+
+TEST(Cli, PlyMeshesAreWrittenAndRendered) {
+    const fs::path out = freshDir("ply_meshes");
+    const fs::path scene = out / "tiny.yaml";
+    writeTinyVariant(scene, "surface:",
+                     "surface: {method: smooth_spheres, mesh_format: ply}\nrender: {width: 160, height: 90}\n");
+    const Result r = runGanache("run " + scene.string() + " --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.output;
+    for (int f = 1; f <= 5; ++f) {
+        const fs::path mesh = out / fmt::format("mesh/tiny.{:04}.ply", f);
+        ASSERT_TRUE(fs::exists(mesh)) << mesh;
+        EXPECT_FALSE(fs::exists(out / fmt::format("mesh/tiny.{:04}.obj", f)));
+        EXPECT_GT(ganache::readPly(mesh).triangles.size(), 100u);
+    }
+    EXPECT_NE(r.output.find("(5 of them from surface meshes)"), std::string::npos) << r.output;
 }
 
 TEST(Cli, BadInputExitsWithTwoAndSaysWhere) {
