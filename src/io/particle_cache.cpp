@@ -1,7 +1,10 @@
 #include "io/particle_cache.h"
 
+#include "io/ply.h"
+
 #include "core/errors.h"
 #include "io/checksum.h"
+#include "io/ply.h"
 #include "io/vdb_file.h"
 
 #include <fmt/format.h>
@@ -11,6 +14,7 @@
 #include <openvdb/points/PointDataGrid.h>
 #include <openvdb/tools/PointIndexGrid.h>
 
+#include <algorithm>
 #include <numeric>
 
 namespace ganache {
@@ -64,6 +68,39 @@ T readValue(const ovp::PointDataTree::LeafNodeType& leaf, const std::string& nam
 }
 
 }  // namespace
+
+void writeParticlePly(const std::filesystem::path& path, const ParticleSet& fluid, const CacheInfo& info) {
+    PlyFile ply(fmt::format("ganache {} frame {} (t = {:.4f} s): {} fluid particles of radius {} m\nunits: metres, "
+                            "seconds, kilograms; y up",
+                            info.scene, info.frame, info.time, fluid.size(), info.particleRadius));
+    std::vector<std::string> properties = {"float x",  "float y",    "float z", "float vx",
+                                           "float vy", "float vz", "float mass", "uint id"};
+    std::vector<const std::vector<Real>*> scalars;
+    std::vector<const std::vector<Vec3>*> vectors;
+    for (const auto& [name, values] : fluid.scalars())
+        if (fluid.isCached(name)) properties.push_back("float " + name), scalars.push_back(&values);
+    for (const auto& [name, values] : fluid.vectors())
+        if (fluid.isCached(name)) {
+            for (const char* axis : {"_x", "_y", "_z"}) properties.push_back("float " + name + axis);
+            vectors.push_back(&values);
+        }
+    ply.element("vertex", fluid.size(), properties);
+    ply.reserve(fluid.size() * 4 * properties.size());
+    // In id order, as the caches read back: a point keeps its place from frame to frame while none is added or lost.
+    std::vector<std::size_t> order(fluid.size());
+    std::iota(order.begin(), order.end(), std::size_t(0));
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return fluid.id()[a] < fluid.id()[b]; });
+    for (const std::size_t i : order) {
+        for (int k = 0; k < 3; ++k) ply.put(float(fluid.x()[i][k]));
+        for (int k = 0; k < 3; ++k) ply.put(float(fluid.v()[i][k]));
+        ply.put(float(fluid.mass()[i]));
+        ply.put(std::uint32_t(fluid.id()[i]));  // ids stay far below 2^32: one per particle ever made
+        for (const auto* values : scalars) ply.put(float((*values)[i]));
+        for (const auto* values : vectors)
+            for (int k = 0; k < 3; ++k) ply.put(float((*values)[i][k]));
+    }
+    ply.write(path);
+}
 
 void writeParticleCache(const std::filesystem::path& path, const ParticleSet& fluid,
                         const std::vector<BoundaryBody>& boundaries, const CacheInfo& info) {

@@ -20,6 +20,12 @@ struct CacheInfo {
     Real particleRadius = 0;  ///< [m]
 };
 
+/// The fluid as a binary PLY point cloud (`particles.export: ply`), for tools that read no OpenVDB points (Blender
+/// 3.4 among them): per point float x y z, vx vy vz [m/s], mass [kg], uint id, then each attribute the cache carries
+/// (float, vectors as <name>_x, _y, _z); no faces; in id order. Metres, y up, as every other output. Written
+/// atomically.
+void writeParticlePly(const std::filesystem::path& path, const ParticleSet& fluid, const CacheInfo& info);
+
 struct CacheContents {
     CacheInfo info;
     ParticleSet fluid;  ///< sorted by id

@@ -28,6 +28,10 @@ std::filesystem::path OutputLayout::particles(std::int64_t frame) const {
     return root / "particles" / fmt::format("{}.{:04}.vdb", name, frame);
 }
 
+std::filesystem::path OutputLayout::points(std::int64_t frame) const {
+    return root / "points" / fmt::format("{}.{:04}.ply", name, frame);
+}
+
 std::filesystem::path OutputLayout::surface(std::int64_t frame) const {
     return root / "surface" / fmt::format("{}.{:04}.vdb", name, frame);
 }

@@ -41,6 +41,7 @@ struct OutputLayout {
     std::filesystem::path sample() const { return root / "sample" / (name + ".vdb"); }
     std::filesystem::path sampleCache() const { return root / "cache"; }  ///< sampled mesh inputs, by key
     std::filesystem::path particles(std::int64_t frame) const;
+    std::filesystem::path points(std::int64_t frame) const;   ///< <out>/points/<name>.NNNN.ply (particles.export)
     std::filesystem::path surface(std::int64_t frame) const;  ///< <out>/surface/<name>.NNNN.vdb
     std::filesystem::path mesh(std::int64_t frame) const;     ///< <out>/mesh/<name>.NNNN.obj (or .ply)
     std::filesystem::path preview(std::int64_t frame) const;  ///< <out>/preview/<name>.NNNN.png

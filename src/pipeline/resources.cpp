@@ -39,6 +39,8 @@ constexpr int kRenderContexts = 2;
 // tests/scenes/resume.yaml; the default scene's 96 frames: 16 MiB estimated, 12 MiB written); a checkpoint holds
 // every attribute in 64 bits (about 150 bytes).
 constexpr double kFluidCacheBytes = 60, kBoundaryCacheBytes = 35, kCheckpointBytes = 150;
+// The PLY export: 32 bytes a particle, and 4 per effect attribute (at most a few).
+constexpr double kFluidPlyBytes = 48;
 
 // Boundary particles the sampler puts on the scene's boundaries: one layer, r apart, over their surfaces within
 // the domain (tests/scenes/resume.yaml: 3,750 estimated, 3,920 sampled).
@@ -127,7 +129,8 @@ ResourceEstimate estimateResources(const Scene& scene, std::pair<std::int64_t, s
 
     if (has(stages, StageId::Sample)) e.sampleDisk = kFluidCacheBytes * e.fluid + kBoundaryCacheBytes * e.boundary;
     if (has(stages, StageId::Simulate)) {
-        e.particleDisk = written * (kFluidCacheBytes * e.fluid + (moving ? kBoundaryCacheBytes * e.boundary : 0));
+        e.particleDisk = written * (kFluidCacheBytes * e.fluid + (moving ? kBoundaryCacheBytes * e.boundary : 0) +
+                                    (scene.exportPly ? kFluidPlyBytes * e.fluid : 0));
         if (scene.checkpointEvery > 0) e.checkpointDisk = double(scene.checkpointsKept + 1) * kCheckpointBytes * e.fluid;
     }
     if (surface) {

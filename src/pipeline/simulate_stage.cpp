@@ -110,11 +110,18 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
 
     Simulation sim(simulationSetup(scene), std::move(start.fluid), start.boundaries);
     const FrameRange& fr = scene.frames;
+    if (scene.exportPly) fs::create_directories(layout.points(frames.first).parent_path());
+    std::size_t written = 0;
     auto writeFrame = [&](std::int64_t f) {
         if (f < frames.first || f > frames.second) return;
-        writeParticleCache(layout.particles(f), sim.particles(), sim.boundary().movingBodies(),
-                           {scene.name, f, sim.time(), fr.fps, scene.particleRadius});
+        ++written;
+        const CacheInfo info{scene.name, f, sim.time(), fr.fps, scene.particleRadius};
+        writeParticleCache(layout.particles(f), sim.particles(), sim.boundary().movingBodies(), info);
         stage.outputs.push_back(layout.particles(f).string());
+        if (scene.exportPly) {
+            writeParticlePly(layout.points(f), sim.particles(), info);
+            stage.outputs.push_back(layout.points(f).string());
+        }
     };
     std::int64_t next = fr.start + 1;
     if (from) {
@@ -165,11 +172,12 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     const SolverStats& s = sim.stats();
     report.measureCount("checkpoints/written", checkpoints);
     report.measure("checkpoints/seconds", checkpointSeconds);
-    stage.note = fmt::format("{}{} steps to t = {:.3f} s, {} frames written, {} checkpoints ({:.2f} s){}",
+    stage.note = fmt::format("{}{} steps to t = {:.3f} s, {} frames written{}, {} checkpoints ({:.2f} s){}",
                              from ? fmt::format("resumed at frame {} (t = {:.4f} s); ", from->info.frame,
                                                 from->state.time)
                                   : std::string(),
-                             s.steps, sim.time(), stage.outputs.size() - checkpoints, checkpoints, checkpointSeconds,
+                             s.steps, sim.time(), written, scene.exportPly ? " (with PLY points)" : "", checkpoints,
+                             checkpointSeconds,
                              s.warningCount ? fmt::format(", {} warnings", s.warningCount) : std::string());
 }
 

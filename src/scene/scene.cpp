@@ -478,6 +478,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
     scene.finalRadius = particles.positive("radius", std::nullopt, "m");
     scene.previewScale = particles.number("preview_scale", scene.previewScale, "x radius", Bounds{1, 100});
     scene.maxParticles = particles.integer("max_count", scene.maxParticles, 1, 2'000'000'000);
+    scene.exportPly = particles.choice("export", "none", {"none", "ply"}) == "ply";
     particles.rejectUnused();
     const Real radiusScale = quality.label == "preview" ? scene.previewScale
                              : quality.label == "final" ? 1

@@ -162,6 +162,7 @@ struct Scene {
     Real finalRadius = 0;            ///< particles.radius [m], the radius at final quality
     Real previewScale = 2;           ///< particles.preview_scale
     std::int64_t maxParticles = 20'000'000;  ///< particles.max_count: refuse scenes estimated above it
+    bool exportPly = false;          ///< particles.export: ply: points/<scene>.NNNN.ply besides each cache
     Location radiusAt;
     Quality quality;
     Real particleRadius = 0;         ///< the radius this run uses [m], after --quality

@@ -339,6 +339,36 @@ TEST(Cli, PlyMeshesAreWrittenAndRendered) {
     EXPECT_NE(r.output.find("(5 of them from surface meshes)"), std::string::npos) << r.output;
 }
 
+// particles.export: ply writes each frame's fluid as a PLY point cloud beside its cache: the same particles, with
+// velocity, mass, id and the effects' attributes (here the heat effect's temperature) as named properties.
+TEST(Cli, ParticlePlyExportHoldsTheCachesParticlesAndAttributes) {
+    const fs::path out = freshDir("particle_ply");
+    std::ifstream in(kSource / "tests/scenes/resume.yaml");
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::string particles = "particles: {radius: 0.008, preview_scale: 1}";
+    ASSERT_NE(text.find(particles), std::string::npos);
+    text.replace(text.find(particles), particles.size(), "particles: {radius: 0.008, preview_scale: 1, export: ply}");
+    std::ofstream(out / "resume.yaml") << text;
+    const Result r = runGanache("run " + (out / "resume.yaml").string() + " --frames 1-3 --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.output;
+    for (int f = 1; f <= 3; ++f) {
+        const auto cache = ganache::readParticleCache(out / fmt::format("particles/resume.{:04}.vdb", f));
+        const fs::path ply = out / fmt::format("points/resume.{:04}.ply", f);
+        std::ifstream file(ply, std::ios::binary);
+        std::string header;
+        for (std::string line; std::getline(file, line) && line != "end_header";) header += line + "\n";
+        EXPECT_NE(header.find(fmt::format("element vertex {}\n", cache.fluid.size())), std::string::npos) << header;
+        for (const char* p : {"float x", "float vx", "float mass", "uint id", "float temperature", "float viscosity"})
+            EXPECT_NE(header.find(std::string("property ") + p + "\n"), std::string::npos) << p << "\n" << header;
+        EXPECT_EQ(header.find("element face"), std::string::npos) << "a point cloud has no faces";
+        const ganache::SurfaceMesh points = ganache::readPly(ply);
+        ASSERT_EQ(points.points.size(), cache.fluid.size());
+        for (std::size_t i = 0; i < points.points.size(); ++i)
+            EXPECT_LT((points.points[i] - cache.fluid.x()[i]).norm(), 1e-6) << "the cache's order and place, as floats";
+    }
+    EXPECT_NE(r.output.find("(with PLY points)"), std::string::npos) << r.output;
+}
+
 TEST(Cli, BadInputExitsWithTwoAndSaysWhere) {
     const fs::path broken = kSource / "tests/scenes/broken/negative_radius.yaml";
     Result r = runGanache("run " + broken.string() + " --out " + freshDir("broken").string());
