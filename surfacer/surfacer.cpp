@@ -319,12 +319,7 @@ SurfaceMesh meshOf(const FloatGrid& surface, Real adaptivity) {
     }
     // VolumeToMesh winds faces clockwise seen from outside; turn them counter-clockwise (OBJ's convention).
     for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
-    mesh.normals.assign(mesh.points.size(), Vec3::Zero());
-    for (const auto& t : mesh.triangles) {
-        const Vec3 n = (mesh.points[t[1]] - mesh.points[t[0]]).cross(mesh.points[t[2]] - mesh.points[t[0]]);
-        for (std::uint32_t v : t) mesh.normals[v] += n;  // area-weighted
-    }
-    for (auto& n : mesh.normals) n = n.norm() > 0 ? Vec3(n.normalized()) : Vec3(0, 1, 0);
+    mesh.normalsFromFaces();
     return mesh;
 }
 

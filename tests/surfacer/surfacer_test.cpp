@@ -221,7 +221,7 @@ TEST(Surfacer, PlyMeshesRoundTripAndAreSmallerThanObj) {
             throw;
         },
         InputError);
-    bytes[bytes.size() - 4] = char(0xff);  // the last index's high byte
+    bytes[bytes.size() - 1] = char(0x7f);  // the last index's high byte: past any vertex
     std::ofstream(dir / "ganache_bad_index.ply", std::ios::binary) << bytes;
     EXPECT_THROW(
         try { readPly(dir / "ganache_bad_index.ply"); } catch (const InputError& e) {
