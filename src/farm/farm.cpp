@@ -162,10 +162,12 @@ FarmPlan planFarm(const RunOptions& run, const FarmOptions& options, const Scene
         plan.jobs.push_back({"surface", plan.chunks(), taskCpus,
                              mib(e.surfaceFrameBytes * double(std::min<std::int64_t>(taskCpus, plan.chunk))),
                              limit("surface", chunkFrames, taskCpus), "simulate", false, ""});
+    // A renderer per thread: the estimate's two, and one more for each further CPU.
+    const double renderBytes = e.renderBytes + std::max(0, taskCpus - 2) * e.renderContextBytes;
     if (scene.render.requested)
-        plan.jobs.push_back({"render", plan.chunks(), taskCpus, mib(e.renderBytes), limit("render", chunkFrames, taskCpus),
+        plan.jobs.push_back({"render", plan.chunks(), taskCpus, mib(renderBytes), limit("render", chunkFrames, taskCpus),
                              scene.surface.requested ? "surface" : "simulate", scene.surface.requested, ""});
-    plan.jobs.push_back({"assemble", 0, taskCpus, mib(e.renderBytes), std::nullopt, plan.jobs.back().stage, false, ""});
+    plan.jobs.push_back({"assemble", 0, taskCpus, mib(renderBytes), std::nullopt, plan.jobs.back().stage, false, ""});
 
     for (const FarmJob& j : plan.jobs)
         if (nodeMiB > 0 && j.memoryMiB > nodeMiB)

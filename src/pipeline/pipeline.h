@@ -58,9 +58,9 @@ struct OutputLayout {
 struct ResourceEstimate {
     double fluid = 0, boundary = 0;  ///< particles
     double programBytes = 0;         ///< memory of the program itself, before any particle
-    /// Memory on top of the program [bytes]: sample and simulate; one frame surfaced; the render stage. 0 for a
-    /// stage not asked for.
-    double simulateBytes = 0, surfaceFrameBytes = 0, renderBytes = 0;
+    /// Memory on top of the program [bytes]: sample and simulate; one frame surfaced; the render stage with two
+    /// threads, of which each thread's renderer takes renderContextBytes. 0 for a stage not asked for.
+    double simulateBytes = 0, surfaceFrameBytes = 0, renderBytes = 0, renderContextBytes = 0;
     /// Disk the outputs of the frame range take [bytes].
     double sampleDisk = 0, particleDisk = 0, checkpointDisk = 0, levelSetDisk = 0, meshDisk = 0, previewDisk = 0;
     double disk() const { return sampleDisk + particleDisk + checkpointDisk + levelSetDisk + meshDisk + previewDisk; }

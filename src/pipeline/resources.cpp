@@ -29,11 +29,11 @@ constexpr double kProgramBytes = 100 * double(1 << 20);
 // boundary particle's arrays, grid and share of the cache it is read from. Measured: 155 MiB peak for 25,428 fluid
 // and 94,580 boundary particles (tests/scenes/resume.yaml at --quality 0.2), which these put at 171 MiB.
 constexpr double kFluidBytes = 1024, kBoundaryBytes = 512;
-// The render stage's two llvmpipe contexts with their multisampled buffers and shadow maps, and per context, a
-// frame's surface mesh as read and drawn. Measured on the default scene (two threads, 1280x720): 330 MiB at preview
-// (63k triangles a frame), 711 MiB at final (400k), which these put at 429 and 874 MiB with the program's 100.
-constexpr double kRenderBytes = 250 * double(1 << 20), kRenderTriangleBytes = 600;
-constexpr int kRenderContexts = 2;
+// The render stage: per llvmpipe context (one per thread) its multisampled buffers and shadow maps, and a frame's
+// surface mesh as read and drawn. Measured on the default scene (two threads, 1280x720): 330 MiB at preview (63k
+// triangles a frame), 711 MiB at final (400k), which these put at 429 and 874 MiB with the program's 100.
+constexpr double kRenderContextBytes = 125 * double(1 << 20), kRenderTriangleBytes = 600;
+constexpr int kRenderContexts = 2;  // what the guard plans for
 // File sizes per particle: a particle cache holds 32-bit positions and velocities, 64-bit mass and id and 32-bit
 // effect attributes (about 60 bytes a fluid particle, 35 a boundary particle with the OpenVDB overhead, measured on
 // tests/scenes/resume.yaml; the default scene's 96 frames: 16 MiB estimated, 12 MiB written); a checkpoint holds
@@ -121,10 +121,12 @@ ResourceEstimate estimateResources(const Scene& scene, std::pair<std::int64_t, s
     if (surface) e.surfaceFrameBytes = estimateSurfaceBytes(std::size_t(e.fluid), scene.particleRadius, scene.surface);
     if (render) {
         const bool meshes = scene.surface.requested && scene.render.view != RenderView::Particles;
-        e.renderBytes = kRenderBytes + kFluidBytes * e.fluid +
-                        (meshes ? kRenderContexts * kRenderTriangleBytes *
-                                      estimateSurfaceTriangles(std::size_t(e.fluid), scene.particleRadius, scene.surface)
-                                : 0.0);
+        e.renderContextBytes =
+            kRenderContextBytes +
+            (meshes ? kRenderTriangleBytes *
+                          estimateSurfaceTriangles(std::size_t(e.fluid), scene.particleRadius, scene.surface)
+                    : 0.0);
+        e.renderBytes = kFluidBytes * e.fluid + kRenderContexts * e.renderContextBytes;
     }
 
     if (has(stages, StageId::Sample)) e.sampleDisk = kFluidCacheBytes * e.fluid + kBoundaryCacheBytes * e.boundary;
