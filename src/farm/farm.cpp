@@ -331,8 +331,11 @@ void farmSubmitCommand(const RunOptions& run, const FarmOptions& options) {
     const FarmPlan plan = planFarm(run, options, scene, frames, partition);
     if (fs::exists(planFile(plan.root))) {  // two graphs must not write one folder at once
         std::vector<std::string> earlier;
-        for (const FarmJob& j : readPlan(plan.root).jobs)
-            if (!j.id.empty()) earlier.push_back(j.id);
+        try {
+            for (const FarmJob& j : readPlan(plan.root).jobs)
+                if (!j.id.empty()) earlier.push_back(j.id);
+        } catch (const InputError&) {  // a damaged plan names no jobs; this submission replaces it
+        }
         if (const auto queued = slurm::queue(earlier); !queued.empty()) {
             std::vector<std::string> ids;
             for (const auto& [id, state] : queued) ids.push_back(id);
