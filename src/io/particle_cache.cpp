@@ -1,7 +1,5 @@
 #include "io/particle_cache.h"
 
-#include "io/ply.h"
-
 #include "core/errors.h"
 #include "io/checksum.h"
 #include "io/ply.h"
