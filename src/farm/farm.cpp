@@ -14,6 +14,8 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
+#include <map>
 #include <optional>
 
 #include <sys/statfs.h>

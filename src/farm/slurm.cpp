@@ -63,9 +63,11 @@ Partition partition(const std::string& name) {
         std::istringstream in(line);
         for (std::string field; std::getline(in, field, '|');) f.push_back(field);
         if (f.size() != 5) continue;
-        Partition& p = all[f[0].back() == '*' ? f[0].substr(0, f[0].size() - 1) : f[0]];
-        p.name = f[0].back() == '*' ? f[0].substr(0, f[0].size() - 1) : f[0];
-        p.isDefault |= f[0].back() == '*';
+        const bool isDefault = !f[0].empty() && f[0].back() == '*';
+        const std::string partitionName = isDefault ? f[0].substr(0, f[0].size() - 1) : f[0];
+        Partition& p = all[partitionName];
+        p.name = partitionName;
+        p.isDefault |= isDefault;
         Node n{f[1], 0, 0, f[4]};
         try {
             n.cpus = std::stoi(f[2]);
