@@ -10,7 +10,9 @@
 //    neighbours, which fills the dips between spheres;
 //  - anisotropic: Yu & Turk 2013: each particle's kernel (support 4 r) stretched along its neighbours' spread
 //    (a principal component analysis, at most 2:1, volume kept), so thin sheets and threads stay smooth instead
-//    of beading; the surface is where the kernel sum falls to half its value inside a lattice of spacing 2 r.
+//    of beading; the surface is where the kernel sum falls to half its value inside a lattice of spacing 2 r. The
+//    sum is taken only near the surface (found on a lattice of twice the voxel), and the signed distance comes
+//    from it directly (anisotropic.cpp).
 // Then mean-curvature smoothing (OpenVDB LevelSetFilter), and meshing (OpenVDB VolumeToMesh).
 
 #include "core/particles.h"
