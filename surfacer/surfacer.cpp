@@ -311,14 +311,10 @@ Real bandVoxels(std::size_t particles, Real r, const SurfaceSettings& settings) 
 
 double estimateSurfaceBytes(std::size_t particles, Real r, const SurfaceSettings& settings) {
     // Calibrated on surface_bench's puddles (200k and 1M particles, docs/benchmarks.md), where the measured peak
-    // was 60-75 bytes per voxel of the final band (the band, its smoothing's copies, the mesh) plus, for
-    // anisotropic kernels, about 4.5 bytes per voxel of the kernel sum over the fluid's volume and its support;
-    // 200 bytes a particle cover the cache and the per-particle kernels. Every estimate was above the measured
-    // peak (1.6-2.3x).
-    const Real voxel = settings.voxelFraction * r;
-    const Real volume = Real(particles) * 8 * r * r * r;
-    const Real fieldVoxels = settings.method == SurfaceMethod::Anisotropic ? 2 * volume / (voxel * voxel * voxel) : 0;
-    return 80 * bandVoxels(particles, r, settings) + 5 * fieldVoxels + 200.0 * double(particles);
+    // was 60-75 bytes per voxel of the final band (the band, its smoothing's copies, the mesh); 200 bytes a particle
+    // cover the cache and the per-particle kernels. Every estimate was above the measured peak (1.6-2.3x; the
+    // anisotropic kernel sum, now taken only near the surface, stays within the same bound).
+    return 80 * bandVoxels(particles, r, settings) + 200.0 * double(particles);
 }
 
 double estimateSurfaceTriangles(std::size_t particles, Real r, const SurfaceSettings& settings) {
