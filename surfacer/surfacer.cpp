@@ -8,11 +8,9 @@
 #include "core/timing.h"
 #include "io/vdb_file.h"
 
-#include <fmt/format.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/points/PointConversion.h>
 #include <openvdb/points/PointRasterizeSDF.h>
-#include <openvdb/tools/Composite.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetFilter.h>
 #include <openvdb/tools/LevelSetUtil.h>
@@ -23,7 +21,6 @@
 #include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tools/VolumeToMesh.h>
 #include <openvdb/tree/LeafManager.h>
-#include <tbb/parallel_reduce.h>
 
 #include <map>
 #include <mutex>
