@@ -103,6 +103,21 @@ struct LatticeLeaf {
     std::uint64_t bricks;
 };
 
+// The kernels' centres sorted into cells of one leaf of a lattice of spacing h (8 h), and how far the largest
+// kernel reaches from its centre along each axis.
+struct KernelBins {
+    Real h;
+    UniformGrid grid;
+    Vec3 reach = Vec3::Zero();
+
+    KernelBins(const std::vector<Ellipsoid>& kernels, Real spacing) : h(spacing), grid(8 * spacing) {
+        std::vector<Vec3> centres(kernels.size());
+        for (std::size_t i = 0; i < kernels.size(); ++i)
+            reach = reach.cwiseMax(kernels[i].extent), centres[i] = kernels[i].centre;
+        grid.build(centres);
+    }
+};
+
 // The 4 bits of the bricks along z under the row (a, b) of a leaf (a, b in 0..7).
 inline unsigned rowBricks(std::uint64_t bricks, int a, int b) {
     return unsigned(bricks >> ((a >> 1) * 16 + (b >> 1) * 4)) & 0xFu;
@@ -113,20 +128,14 @@ inline unsigned rowBricks(std::uint64_t bricks, int a, int b) {
 // the kernels whose boxes reach it from a grid of their centres, in that grid's fixed order: deterministic for
 // any thread count. Along a row of z the ellipsoid is an interval, found from a quadratic, so only points inside
 // a kernel are visited.
-FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const std::vector<LatticeLeaf>& targets, Real r,
-                         Real h, Real iso) {
+FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
+                         const std::vector<LatticeLeaf>& targets, Real r, Real iso) {
     const CubicSpline w(kKernelSupport * r);
     const Real support = w.supportRadius();
     const float scale = float(8 * r * r * r * w.W0());  // each particle weighs one lattice cell (2r)^3
-    Vec3 reach = Vec3::Zero();
-    for (const Ellipsoid& e : kernels) reach = reach.cwiseMax(e.extent);
-    const Real cell = 8 * h;
-    UniformGrid bins(cell);
-    {
-        std::vector<Vec3> centres(kernels.size());
-        for (std::size_t i = 0; i < kernels.size(); ++i) centres[i] = kernels[i].centre;
-        bins.build(centres);
-    }
+    const Real h = binned.h, cell = 8 * h;
+    const Vec3& reach = binned.reach;
+    const UniformGrid& bins = binned.grid;
     std::vector<FloatLeaf*> made(targets.size(), nullptr);
     forEachBlock(targets.size(), [&](std::size_t begin, std::size_t end) {
         alignas(32) float sum[512];
@@ -193,14 +202,10 @@ FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const std::vecto
     return grid;
 }
 
-// Every leaf of the lattice of spacing h that some kernel reaches, all bricks chosen.
-std::vector<LatticeLeaf> leavesReached(const std::vector<Ellipsoid>& kernels, Real h) {
-    Vec3 reach = Vec3::Zero();
-    std::vector<Vec3> centres(kernels.size());
-    for (std::size_t i = 0; i < kernels.size(); ++i) reach = reach.cwiseMax(kernels[i].extent), centres[i] = kernels[i].centre;
-    UniformGrid bins(8 * h);  // a cell of the bins is a leaf of the lattice
-    bins.build(centres);
-    const int around = int(std::ceil(reach.maxCoeff() / (8 * h)));
+// Every leaf of the binned lattice that some kernel reaches (a cell of the bins is a leaf), all bricks chosen.
+std::vector<LatticeLeaf> leavesReached(const KernelBins& binned) {
+    const UniformGrid& bins = binned.grid;
+    const int around = int(std::ceil(binned.reach.maxCoeff() / (8 * binned.h)));
     std::vector<openvdb::Coord> origins;
     for (std::size_t c = 0; c < bins.cellCount(); ++c) {
         const auto& k = bins.cellCoords(c);
@@ -325,13 +330,14 @@ FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxe
     const CubicSpline w(kKernelSupport * r);
     const Real interior = latticeKernelSum(2 * r, w) * 8 * r * r * r;
     const std::vector<Ellipsoid> kernels = anisotropicKernels(x, r);
-    const FloatGrid::Ptr coarse = kernelSum(kernels, leavesReached(kernels, 2 * voxel), r, 2 * voxel, 0.5 * interior);
+    const KernelBins coarseBins(kernels, 2 * voxel);
+    const FloatGrid::Ptr coarse = kernelSum(kernels, coarseBins, leavesReached(coarseBins), r, 0.5 * interior);
     // The bricks the surface may cross, and around them as far as the band reaches (its half width and one voxel
     // for the gradient, in bricks of two voxels).
     const openvdb::MaskGrid::Ptr bricks = bricksCrossed(*coarse, interior);
     openvdb::tools::dilateActiveValues(bricks->tree(), int(std::ceil((halfBand + 1) / 2)),
                                        openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
-    const FloatGrid::Ptr field = kernelSum(kernels, fineLeaves(*bricks), r, voxel, 0.5 * interior);
+    const FloatGrid::Ptr field = kernelSum(kernels, KernelBins(kernels, voxel), fineLeaves(*bricks), r, 0.5 * interior);
     fieldToDistance(*field, voxel, halfBand);
     field->setGridClass(openvdb::GRID_LEVEL_SET);
     return field;
