@@ -1,6 +1,6 @@
 #pragma once
-// The sweeps over neighbour pairs that every solver iteration makes, on plain arrays so that the compiler turns them
-// into SIMD loops (pair_sweeps.cpp is compiled with reassociation allowed; see src/CMakeLists.txt). Each pair's
+// The sweeps over neighbour pairs that every solver iteration makes, as tight scalar loops over plain arrays
+// (pair_sweeps.cpp is compiled with reassociation allowed and without SIMD; see src/CMakeLists.txt). Each pair's
 // geometry is computed once per step: the solvers pass per-pair weights in the order of the neighbour lists, and the
 // sweeps only combine them with the current vectors. A particle's sum is always taken in the same order, so results
 // do not depend on the thread count.

@@ -145,26 +145,33 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
     m_pairs.resize(f.pairs());
     m_boundaryPairs.resize(sticky() ? b.pairs() : 0);
     m_fluidBlocks.resize(particles.size());
+    const Real* rho = ctx.density.data();
+    const Real* g = ctx.gradients.fluid.data();
     forEachParticle(particles.size(), [&](std::size_t i) {
         // 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)) g_ij, mu and m averaged over the pair so that the
-        // operator is symmetric [Eq. 9]; the diagonal block sums k_ij x_ij x_ij^T
-        Mat3 block = Mat3::Zero();
+        // operator is symmetric [Eq. 9]; the diagonal block sums k_ij x_ij x_ij^T (six distinct entries)
+        const Real mui = m_mu(i), mi = m[i], ci = kTwoDPlus4 * 0.25 / rho[i];
+        const bool varies = m_mu.varies();
+        Real b00 = 0, b01 = 0, b02 = 0, b11 = 0, b12 = 0, b22 = 0;
         for (std::size_t p = f.first(i); p < f.last(i); ++p) {
             const std::uint32_t j = f.indices[p];
             const Vec3 xij = x[i] - x[j];
-            m_pairs[p] = kTwoDPlus4 * 0.5 * (m_mu(i) + m_mu(j)) * 0.5 * (m[i] + m[j]) /
-                         (ctx.density[i] * ctx.density[j]) / (xij.squaredNorm() + eps) * ctx.gradients.fluid[p];
-            block += m_pairs[p] * xij * xij.transpose();
+            const Real muj = varies ? m_mu(j) : mui;
+            const Real k = ci * (mui + muj) * (mi + m[j]) * g[p] / (rho[j] * (xij.squaredNorm() + eps));
+            m_pairs[p] = k;
+            b00 += k * xij.x() * xij.x(), b01 += k * xij.x() * xij.y(), b02 += k * xij.x() * xij.z();
+            b11 += k * xij.y() * xij.y(), b12 += k * xij.y() * xij.z(), b22 += k * xij.z() * xij.z();
         }
-        m_fluidBlocks[i] = block;
+        m_fluidBlocks[i] << b00, b01, b02, b01, b11, b12, b02, b12, b22;
         // 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) g_ik [Eq. 11-12]
-        if (sticky())
+        if (sticky()) {
+            const Real cb = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] / (rho[i] * rho[i]);
             for (std::size_t p = b.first(i); p < b.last(i); ++p) {
                 const std::uint32_t k = b.indices[p];
-                m_boundaryPairs[p] = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] * ctx.boundary.volume[k] /
-                                     (ctx.density[i] * ctx.density[i]) /
-                                     ((x[i] - ctx.boundary.x[k]).squaredNorm() + eps) * ctx.gradients.boundary[p];
+                m_boundaryPairs[p] = cb * ctx.boundary.volume[k] * ctx.gradients.boundary[p] /
+                                     ((x[i] - ctx.boundary.x[k]).squaredNorm() + eps);
             }
+        }
     });
 }
 
