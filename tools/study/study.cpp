@@ -74,7 +74,8 @@ std::vector<Knob> knobs(bool quick) {
     std::vector<Knob> all;
     Knob tol{"viscosity_tolerance", "effects.viscosity.tolerance: CG stops at this residual, relative to the correction", {}};
     for (Real t : {1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6})
-        tol.points.push_back(viscosityPoint(fmt::format("{:g}", t), t == 1e-4, [t](P& p) { p.tolerance = t; }));
+        tol.points.push_back(
+            viscosityPoint(fmt::format("{:g}", t), t == P{}.tolerance, [t](P& p) { p.tolerance = t; }));
     all.push_back(tol);
     Knob pressure{"pressure_tolerance",
                   "simulation.pressure.density_error / divergence_error: DFSPH's two solves stop at these", {}};

@@ -23,10 +23,12 @@ std::size_t maxClusters(std::size_t particles) {
 }
 // The stiffness (dt A against the identity, about dt mu / (rho h^2)) from which a particle joins a cluster; below it
 // the fluid-wide rigid motions serve. Clusters pay where the solve struggles: the default scene's chocolate (stiffness
-// 30 molten to 7e6 solid) converges with them and stops at the cap 222 times without, 64 times when only particles
-// above 1e4 join; on the 1,000 Pa s block of the anchors (about 150) they halve the iterations but cost 10 % more
-// time.
-constexpr Real kStiff = 300;
+// 30 molten to 7e6 solid) stopped at the 100-iteration cap 222 times without them (tolerance 1e-4). Below a few
+// thousand they cost more than they save: on the 50k block of the anchors (1,000 Pa s, stiffness 560-630, tolerance
+// 1e-3) they cut CG from 25 to 17 iterations a solve but took the viscosity from 196 to 315 ms a step (1 thread); the
+// default scene, with 300 / 1,000 / 3,000 here, takes 6.9 / 7.3 / 8.6 iterations a solve, 7.8 / 7.1 / 6.5 ms a step
+// (2 threads), never at the cap.
+constexpr Real kStiff = 3000;
 
 }  // namespace
 
