@@ -149,15 +149,17 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
     const Real* g = ctx.gradients.fluid.data();
     forEachParticle(particles.size(), [&](std::size_t i) {
         // 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)) g_ij, mu and m averaged over the pair so that the
-        // operator is symmetric [Eq. 9]; the diagonal block sums k_ij x_ij x_ij^T (six distinct entries)
-        const Real mui = m_mu(i), mi = m[i], ci = kTwoDPlus4 * 0.25 / rho[i];
+        // operator is symmetric [Eq. 9], to the last bit (k_ji rounds as k_ij does); the diagonal block sums
+        // k_ij x_ij x_ij^T (six distinct entries)
+        const Real mui = m_mu(i), mi = m[i];
         const bool varies = m_mu.varies();
         Real b00 = 0, b01 = 0, b02 = 0, b11 = 0, b12 = 0, b22 = 0;
         for (std::size_t p = f.first(i); p < f.last(i); ++p) {
             const std::uint32_t j = f.indices[p];
             const Vec3 xij = x[i] - x[j];
             const Real muj = varies ? m_mu(j) : mui;
-            const Real k = ci * (mui + muj) * (mi + m[j]) * g[p] / (rho[j] * (xij.squaredNorm() + eps));
+            const Real k =
+                kTwoDPlus4 * 0.25 * (mui + muj) * (mi + m[j]) * g[p] / (rho[i] * rho[j] * (xij.squaredNorm() + eps));
             m_pairs[p] = k;
             b00 += k * xij.x() * xij.x(), b01 += k * xij.x() * xij.y(), b02 += k * xij.x() * xij.z();
             b11 += k * xij.y() * xij.y(), b12 += k * xij.y() * xij.z(), b22 += k * xij.z() * xij.z();
