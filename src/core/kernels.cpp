@@ -4,7 +4,7 @@
 
 namespace ganache {
 
-CubicSpline::CubicSpline(Real supportRadius) : m_h(supportRadius) {
+CubicSpline::CubicSpline(Real supportRadius) : m_h(supportRadius), m_invH(1 / supportRadius) {
     if (!(supportRadius > 0) || !std::isfinite(supportRadius))
         throw std::invalid_argument("CubicSpline: support radius must be positive and finite");
     const Real h3 = m_h * m_h * m_h;

@@ -17,7 +17,7 @@ public:
 
     /// W as a function of the distance r >= 0.
     Real W(Real r) const {
-        const Real q = r / m_h;
+        const Real q = r * m_invH;
         if (q >= 1) return 0;
         if (q <= Real(0.5)) return m_k * (6 * q * q * (q - 1) + 1);
         const Real a = 1 - q;
@@ -31,18 +31,19 @@ public:
     /// The factor g <= 0 with grad W(r) = g r, for |r| = rl [1/m^5]: what solvers keep per neighbour pair, so that
     /// no sweep evaluates the kernel again.
     Real gradFactor(Real rl) const {
-        const Real q = rl / m_h;
+        const Real q = rl * m_invH;
         if (q >= 1 || rl < Real(1e-12) * m_h) return 0;
         const Real dWdq = q <= Real(0.5) ? m_l * q * (3 * q - 2) : -m_l * (1 - q) * (1 - q);
-        return dWdq / (rl * m_h);
+        return dWdq * m_invH / rl;
     }
 
     Real W0() const { return m_k; }  ///< W at r = 0
 
 private:
     Real m_h;
-    Real m_k;  // 8 / (pi h^3)
-    Real m_l;  // 48 / (pi h^3): dW/dq prefactor
+    Real m_invH;  // 1 / h: W and its gradient multiply by it, leaving one division a pair
+    Real m_k;     // 8 / (pi h^3)
+    Real m_l;     // 48 / (pi h^3): dW/dq prefactor
 };
 
 /// The kernel support radius ganache uses for a particle radius r: h = 4 r (two particle diameters),

@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -61,11 +62,13 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     tbb::parallel_sort(keyed.begin(), keyed.end());
 
     m_sorted.resize(n);
+    for (auto& c : m_sortedCoords) c.resize(n);
     m_cellKeys.clear();
     m_cellBegin.clear();
     m_cellCoords.clear();
     for (std::size_t s = 0; s < n; ++s) {
         m_sorted[s] = keyed[s].second;
+        for (int a = 0; a < 3; ++a) m_sortedCoords[std::size_t(a)][s] = x[keyed[s].second][a];
         if (s == 0 || keyed[s].first != keyed[s - 1].first) {
             m_cellKeys.push_back(keyed[s].first);
             m_cellBegin.push_back(std::uint32_t(s));
@@ -86,10 +89,38 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
         m_tableKeys[slot] = m_cellKeys[c];
         m_tableCells[slot] = std::uint32_t(c);
     }
+
+    // Where the occupied cells fill a good part of their bounding box (a body of fluid, a tank's walls), a dense
+    // table finds a cell with one load instead of a hashed probe; its size is capped at a few words per cell.
+    m_denseCells.clear();
+    if (m_cellCoords.empty()) return;
+    std::array<std::int64_t, 3> lo{m_cellCoords[0][0], m_cellCoords[0][1], m_cellCoords[0][2]}, hi = lo;
+    for (const auto& c : m_cellCoords)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min<std::int64_t>(lo[a], c[a]);
+            hi[a] = std::max<std::int64_t>(hi[a], c[a]);
+        }
+    std::uint64_t volume = 1;
+    for (int a = 0; a < 3; ++a) volume *= std::uint64_t(hi[a] - lo[a] + 1);
+    if (volume > 16 * m_cellCoords.size() + 4096) return;
+    m_denseMin = lo;
+    for (int a = 0; a < 3; ++a) m_denseSize[a] = hi[a] - lo[a] + 1;
+    m_denseCells.assign(volume, 0);
+    for (std::size_t c = 0; c < m_cellCoords.size(); ++c) {
+        const auto& cc = m_cellCoords[c];
+        m_denseCells[std::size_t(((cc[2] - lo[2]) * m_denseSize[1] + (cc[1] - lo[1])) * m_denseSize[0] +
+                                 (cc[0] - lo[0]))] = std::uint32_t(c + 1);
+    }
 }
 
 std::int64_t UniformGrid::findCell(std::int64_t cx, std::int64_t cy, std::int64_t cz) const {
     if (m_cellKeys.empty()) return -1;
+    if (dense()) {
+        const std::int64_t ix = cx - m_denseMin[0], iy = cy - m_denseMin[1], iz = cz - m_denseMin[2];
+        if (ix < 0 || iy < 0 || iz < 0 || ix >= m_denseSize[0] || iy >= m_denseSize[1] || iz >= m_denseSize[2])
+            return -1;
+        return std::int64_t(m_denseCells[std::size_t((iz * m_denseSize[1] + iy) * m_denseSize[0] + ix)]) - 1;
+    }
     if (std::abs(cx) > kMaxCell + 1 || std::abs(cy) > kMaxCell + 1 || std::abs(cz) > kMaxCell + 1) return -1;
     const std::uint64_t key = mortonKey(cx, cy, cz);
     const std::uint64_t mask = (std::uint64_t(1) << m_tableBits) - 1;
@@ -111,11 +142,14 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     const auto& qSorted = queryGrid.sortedIndices();
     const auto& tSorted = targetGrid.sortedIndices();
 
-    struct Candidate {
-        Vec3 x;
-        std::uint32_t j;
+    // The candidates of one query cell (the points of its 27 neighbour cells), coordinates apart so that the
+    // distance test vectorises. Sized up only (size() is capacity, not count).
+    struct Candidates {
+        std::vector<Real> x, y, z;
+        std::vector<std::uint32_t> j;
+        std::vector<std::uint64_t> hit;
     };
-    tbb::enumerable_thread_specific<std::vector<Candidate>> scratch;
+    tbb::enumerable_thread_specific<Candidates> scratch;
 
     // One pass: chunks of query cells write their particles' lists into their own buffers (fixed chunk
     // boundaries, so the result is the same for any thread count); a second, cheap pass copies each list
@@ -125,33 +159,72 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     const std::size_t chunks = (cells + kCellsPerChunk - 1) / kCellsPerChunk;
     std::vector<std::vector<std::uint32_t>> buffers(chunks);
     std::vector<std::uint32_t> count(n), chunkOf(n), localStart(n);
+    const Real* tx = targetGrid.sortedCoords(0).data();
+    const Real* ty = targetGrid.sortedCoords(1).data();
+    const Real* tz = targetGrid.sortedCoords(2).data();
 
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const auto& range) {
-        auto& candidates = scratch.local();
+        Candidates& cand = scratch.local();
         for (std::size_t chunk = range.begin(); chunk != range.end(); ++chunk) {
             auto& buffer = buffers[chunk];
+            std::size_t used = 0;
             const std::size_t lastCell = std::min(cells, (chunk + 1) * kCellsPerChunk);
             for (std::size_t c = chunk * kCellsPerChunk; c < lastCell; ++c) {
                 const auto& cc = queryGrid.cellCoords(c);
-                candidates.clear();
+                std::size_t from[27], to[27], m = 0;
+                int ranges = 0;
                 for (int dz = -1; dz <= 1; ++dz)
                     for (int dy = -1; dy <= 1; ++dy)
                         for (int dx = -1; dx <= 1; ++dx) {
                             const std::int64_t t = targetGrid.findCell(cc[0] + dx, cc[1] + dy, cc[2] + dz);
                             if (t < 0) continue;
-                            for (std::size_t s = targetGrid.cellBegin(t); s < targetGrid.cellBegin(t + 1); ++s)
-                                candidates.push_back({targetX[tSorted[s]], tSorted[s]});
+                            from[ranges] = targetGrid.cellBegin(t);
+                            to[ranges] = targetGrid.cellBegin(t + 1);
+                            m += to[ranges] - from[ranges];
+                            ++ranges;
                         }
+                const std::size_t words = (m + 63) / 64;
+                if (cand.j.size() < m)
+                    cand.x.resize(m), cand.y.resize(m), cand.z.resize(m), cand.j.resize(m), cand.hit.resize(m);
+                // Cells hold a handful of points: plain loops beat memcpy calls here.
+                for (std::size_t r = 0, k = 0; r < std::size_t(ranges); ++r)
+                    for (std::size_t s = from[r]; s < to[r]; ++s, ++k) {
+                        cand.x[k] = tx[s];
+                        cand.y[k] = ty[s];
+                        cand.z[k] = tz[s];
+                        cand.j[k] = tSorted[s];
+                    }
+                const Real* cx = cand.x.data();
+                const Real* cy = cand.y.data();
+                const Real* cz = cand.z.data();
+                const std::uint32_t* cj = cand.j.data();
+                std::uint64_t* hit = cand.hit.data();
                 for (std::size_t s = queryGrid.cellBegin(c); s < queryGrid.cellBegin(c + 1); ++s) {
                     const std::uint32_t i = qSorted[s];
-                    const Vec3 xi = queryX[i];
+                    const Real xi = queryX[i].x(), yi = queryX[i].y(), zi = queryX[i].z();
+                    const std::uint32_t self = sameSet ? i : UINT32_MAX;
+                    // The distance test over all candidates (it vectorises), packed into one bit per candidate;
+                    // then only the neighbours are visited, in candidate order.
+                    for (std::size_t k = 0; k < m; ++k) {
+                        const Real ex = xi - cx[k], ey = yi - cy[k], ez = zi - cz[k];
+                        hit[k] = std::uint64_t(ex * ex + ey * ey + ez * ez < r2) & std::uint64_t(cj[k] != self);
+                    }
+                    if (buffer.size() < used + m) buffer.resize(std::max(2 * buffer.size(), used + m));
+                    std::uint32_t* dst = buffer.data() + used;
+                    std::size_t found = 0;
+                    for (std::size_t w = 0; w < words; ++w) {
+                        const std::size_t base = 64 * w, span = std::min<std::size_t>(64, m - base);
+                        std::uint64_t bits = 0;
+                        for (std::size_t b = 0; b < span; ++b) bits |= hit[base + b] << b;
+                        for (; bits; bits &= bits - 1) dst[found++] = cj[base + std::size_t(__builtin_ctzll(bits))];
+                    }
                     chunkOf[i] = std::uint32_t(chunk);
-                    localStart[i] = std::uint32_t(buffer.size());
-                    for (const Candidate& cand : candidates)
-                        if ((xi - cand.x).squaredNorm() < r2 && !(sameSet && cand.j == i)) buffer.push_back(cand.j);
-                    count[i] = std::uint32_t(buffer.size() - localStart[i]);
+                    localStart[i] = std::uint32_t(used);
+                    count[i] = std::uint32_t(found);
+                    used += found;
                 }
             }
+            buffer.resize(used);
         }
     });
 
@@ -160,8 +233,11 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     for (std::size_t i = 0; i < n; ++i) out.offsets[i + 1] = out.offsets[i] + count[i];
     out.indices.resize(out.offsets[n]);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& range) {
-        for (std::size_t i = range.begin(); i != range.end(); ++i)
-            std::copy_n(buffers[chunkOf[i]].data() + localStart[i], count[i], out.indices.data() + out.offsets[i]);
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+            const std::uint32_t* from = buffers[chunkOf[i]].data() + localStart[i];
+            std::uint32_t* to = out.indices.data() + out.offsets[i];
+            for (std::uint32_t k = 0; k < count[i]; ++k) to[k] = from[k];  // a few dozen: no memcpy call
+        }
     });
 }
 

@@ -54,22 +54,33 @@ public:
     /// Point indices, cell by cell, cells in Z order: a locality-preserving permutation of the points.
     const std::vector<std::uint32_t>& sortedIndices() const { return m_sorted; }
 
+    /// Coordinate `axis` of the points in sorted order, as they were when the grid was built.
+    const std::vector<Real>& sortedCoords(int axis) const { return m_sortedCoords[std::size_t(axis)]; }
+
     /// The sorted points of cell c are sortedIndices()[cellBegin(c) .. cellBegin(c + 1)).
     std::size_t cellBegin(std::size_t c) const { return m_cellBegin[c]; }
     /// Integer coordinates of cell c.
     const std::array<std::int32_t, 3>& cellCoords(std::size_t c) const { return m_cellCoords[c]; }
     /// Index of the occupied cell with these coordinates, or -1 when it holds no point.
     std::int64_t findCell(std::int64_t cx, std::int64_t cy, std::int64_t cz) const;
+    /// Whether cells are found through a dense table over the occupied cells' bounding box (compact point sets)
+    /// rather than through the hash (sparse ones).
+    bool dense() const { return !m_denseCells.empty(); }
 
 private:
     Real m_cellSize;
     std::vector<std::uint32_t> m_sorted;
+    std::array<std::vector<Real>, 3> m_sortedCoords;  // the points' coordinates in sorted order
     std::vector<std::uint64_t> m_cellKeys;   // Morton keys of the occupied cells, ascending
     std::vector<std::uint32_t> m_cellBegin;  // cellCount() + 1 offsets into m_sorted
     std::vector<std::array<std::int32_t, 3>> m_cellCoords;
     std::vector<std::uint64_t> m_tableKeys;  // open-addressing hash: Morton key -> cell index
     std::vector<std::uint32_t> m_tableCells;
     int m_tableBits = 0;
+    // Dense lookup: cell index + 1 (0: empty) for every cell of the box [m_denseMin, m_denseMin + m_denseSize).
+    std::vector<std::uint32_t> m_denseCells;
+    std::array<std::int64_t, 3> m_denseMin{};
+    std::array<std::int64_t, 3> m_denseSize{};
 };
 
 /// Finds, for every query point i, the target points j with |x_i - x_j| < radius. With sameSet the query

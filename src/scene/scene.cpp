@@ -557,6 +557,8 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
                                                                                : PressureSettings::Solver::Mprgp;
         p.maxIterations = ps.integer("max_iterations", p.maxIterations, 1, 100000);
         p.minIterations = ps.integer("min_iterations", p.minIterations, 0, p.maxIterations);
+        p.minDivergenceIterations =
+            ps.integer("min_divergence_iterations", p.minDivergenceIterations, 0, p.maxIterations);
         ps.rejectUnused();
         // A name, or (as before there were names) a number: 0 is the paper's order, n >= 1 n coupled passes.
         ViscosityOrder& order = scene.viscosityOrder;

@@ -102,6 +102,8 @@ template <class Target>
 std::size_t PressureDFSPH::solveJacobi(Solve which, StepContext& ctx, ParticleSet& particles,
                                        std::vector<Real>& pressure, Target target) {
     const Real tolerance = which == Solve::Density ? m_settings.densityError : m_settings.divergenceError;
+    const auto fewest = std::size_t(which == Solve::Density ? m_settings.minIterations
+                                                            : m_settings.minDivergenceIterations);
     const std::size_t n = particles.size();
     const Real dt = ctx.dt;
     auto& v = particles.v();
@@ -120,7 +122,7 @@ std::size_t PressureDFSPH::solveJacobi(Solve which, StepContext& ctx, ParticleSe
         });
         const Real error = deterministicSum(n, [&](std::size_t i) { return m_residual[i]; }) / Real(n);
         const bool converged = error <= tolerance;
-        if ((converged && iteration >= std::size_t(m_settings.minIterations)) ||
+        if ((converged && iteration >= fewest) ||
             iteration >= std::size_t(m_settings.maxIterations)) {
             if (!converged) warnCapHit(ctx, which, iteration, error);
             return iteration;
@@ -147,6 +149,8 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     // negative, and proportioning steps that give pressure to particles their neighbours compress. Diagonally
     // preconditioned by the DFSPH factor (1 / A_ii). Every product with A costs what one Jacobi sweep does.
     const Real tolerance = which == Solve::Density ? m_settings.densityError : m_settings.divergenceError;
+    const auto fewest = std::size_t(which == Solve::Density ? m_settings.minIterations
+                                                            : m_settings.minDivergenceIterations);
     const std::size_t n = particles.size();
     const Real dt2 = ctx.dt * ctx.dt;
     const auto& rho0 = ctx.restDensity;
@@ -194,7 +198,7 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     std::size_t iteration = 0;
     for (Real error = meanError();; error = meanError()) {
         const bool converged = error <= tolerance;
-        if ((converged && iteration >= std::size_t(m_settings.minIterations)) ||
+        if ((converged && iteration >= fewest) ||
             iteration >= std::size_t(m_settings.maxIterations)) {
             if (!converged) warnCapHit(ctx, which, iteration, error);
             break;
