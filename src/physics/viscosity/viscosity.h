@@ -28,7 +28,7 @@ struct ViscosityParams : EffectParams {
     /// make. The rigid motions are solved exactly after CG, so the tolerance does not decide what happens to momentum
     /// or spin, but it does decide how stiff a stiff fluid stays: with the fluid-wide rigid motions alone a 5e6 Pa s
     /// body on a slipping floor kept parts moving at 10 cm/s at 1e-3 (1.4 cm/s at 1e-4); with the clusters, 1 cm/s.
-    /// At 1e-3 a viscous column at rest stays within the DFSPH tolerance (3.4 mm/s, mean compression 7.6e-6), and the
+    /// At 1e-3 a viscous column at rest stays within the DFSPH tolerance (2.7 mm/s, mean compression 2.7e-6), and the
     /// anchors' spread errors against a converged reference are 0.09 / 1.6 / 0.06-0.08 % (1e-4: 0.08 / 1.8 / 0.06 %)
     /// with 35-55 % fewer iterations (docs/benchmarks.md).
     Real tolerance = 1e-3;
