@@ -86,6 +86,25 @@ TEST(NeighbourSearch, VerySparsePointsHaveNoNeighbours) {
     EXPECT_EQ(nl.particles(), 100u);
 }
 
+TEST(NeighbourSearch, DenseTableAndHashGiveTheSameLists) {
+    // Cells are found through a dense table when the occupied cells fill their bounding box well, else through the
+    // hash: two compact clusters far apart take the hash, each alone the table, and all match brute force.
+    const auto a = randomPoints(600, Vec3(0, 0, 0), Vec3(0.3, 0.3, 0.3), 8);
+    const auto b = randomPoints(600, Vec3(20, -5, 3), Vec3(20.3, -4.7, 3.3), 9);
+    std::vector<Vec3> both = a;
+    both.insert(both.end(), b.begin(), b.end());
+    const Real radius = 0.05;
+    const std::vector<Vec3>* sets[] = {&a, &both};
+    for (const std::vector<Vec3>* x : sets) {
+        UniformGrid grid(radius);
+        grid.build(*x);
+        EXPECT_EQ(grid.dense(), x == &a);
+        NeighbourList nl;
+        findNeighbours(grid, *x, grid, *x, radius, true, nl);
+        expectSameAsBruteForce(nl, bruteForce(*x, *x, radius, true));
+    }
+}
+
 TEST(NeighbourSearch, EmptyInputs) {
     const NeighbourList empty = fluidSearch({}, 0.1);
     EXPECT_EQ(empty.particles(), 0u);
