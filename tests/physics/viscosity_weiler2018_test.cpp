@@ -51,6 +51,45 @@ TEST(ViscousLaplacian, VanishesForRigidRotationWhileStrainRateDoesNot) {
     std::printf("max |lap v| = %.3g 1/(m s), max |D| = %.3g 1/s\n", maxLap, maxStrain);
 }
 
+TEST(ViscousLaplacian, OnTheLatticeItIsExactOnAverageOverShearDirectionsButNotAlongTheAxes) {
+    // Why plane Couette flow between plates parallel to the sampling lattice lags the exact answer (ganache study,
+    // couette): for a shear field v = (n . x)^2 / 2 t (n, t orthonormal; exact Laplacian t), Eq. 7 on the lattice
+    // (support h = 2 spacings) answers R(n, t) t with R = B + (A - 3B) S, S = sum_a n_a^2 t_a^2, A and B the
+    // lattice's fourth moments (x^4 and x^2 y^2) of the pair weights. A continuum has A = 3B; the lattice does not:
+    // shear along the axes (S = 0: Couette on the lattice) gets R = 0.70, shear across a face diagonal
+    // (S = 1/2) 1.43, yet the mean over all directions, (A + 2B) / 5, is 0.99. Momentum diffuses at 0.7 nu in the
+    // Couette case, which the study's 4-5 % RMS error matches (an exact profile at 0.7 nu is 5.6 % off; 0.8 nu,
+    // 3.4 %). No constant in place of 2(d+2) cures it: scaled to make Couette exact, every other direction, and
+    // the mean, would be 1.43 times too viscous. Interior particles only (at least h from the free surface).
+    Simulation sim = freeBlock().simulation();
+    const Real h = sim.kernel().supportRadius(), inner = 0.12 - 0.01 - h;
+    auto response = [&](Vec3 n, Vec3 t) {
+        n.normalize(), t.normalize();
+        ParticleSet p = sim.particles();
+        for (std::size_t i = 0; i < p.size(); ++i) p.v()[i] = 0.5 * std::pow(n.dot(p.x()[i]), 2) * t;
+        const auto lap = viscousLaplacian(p, sim.density(), sim.fluidNeighbours(), sim.kernel());
+        Real lo = INFINITY, hi = -INFINITY;
+        for (std::size_t i = 0; i < p.size(); ++i)
+            if ((p.x()[i].cwiseAbs().array() < inner).all()) lo = std::min(lo, lap[i].dot(t)), hi = std::max(hi, lap[i].dot(t));
+        EXPECT_NEAR(lo, hi, 1e-9 * std::abs(hi));  // a quadratic field: the same answer at every interior site
+        return hi;
+    };
+    const Real axis = response(Vec3::UnitY(), Vec3::UnitX());
+    const Real face = response(Vec3(1, 1, 0), Vec3(1, -1, 0));
+    const Real body = response(Vec3(1, 1, 1), Vec3(1, -1, 0));
+    std::printf("lattice response to shear: along an axis %.4f, face diagonal %.4f, body diagonal %.4f, mean %.4f\n",
+                axis, face, body, (2 * face + 3 * axis) / 5);
+    // The operator is the fourth-moment form above: A = 2 face + axis, B = axis, so the body diagonal (S = 1/3)
+    // answers A / 3, to round-off.
+    EXPECT_NEAR(body, (2 * face + axis) / 3, 1e-9);
+    // The mean over directions, (A + 2B) / 5 = (2 face + 3 axis) / 5, is the continuum's Laplacian within the
+    // 1-2 % that the 0.01 h^2 in Eq. 7's denominator takes off.
+    EXPECT_NEAR((2 * face + 3 * axis) / 5, 1.0, 0.02);
+    // Along the axes 30 % weak, across face diagonals 40 % strong: a factor of two between directions.
+    EXPECT_LT(axis, 0.75);
+    EXPECT_GT(face, 1.35);
+}
+
 namespace {
 
 SolveOutcome solveWeiler(Real mu, std::int64_t maxIterations,
