@@ -48,13 +48,14 @@ ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& preco
     scale = std::sqrt(deterministicSum(n, [&](std::size_t i) { return (b[i] - mv[i]).squaredNorm(); }));
     if (scale == 0) {
         std::copy(v.begin(), v.end(), x.begin());
-        return {};
+        return {0, 0, tolerance};
     }
     const Real rr = deterministicSum(n, [&](std::size_t i) {
         r[i] = b[i] - mx[i];
         return r[i].squaredNorm();
     });
     ViscosityPass pass;
+    pass.tolerance = tolerance;
     pass.residual = std::sqrt(rr) / scale;
     if (pass.residual <= tolerance || maxIterations == 0) return pass;
     Real rz = precondition(r, z);
@@ -215,7 +216,7 @@ Mat3 ViscosityMethod::boundaryBlock(const StepContext& ctx, const ParticleSet& p
 std::string ViscosityMethod::capMessage(const StepContext& ctx, const ViscosityPass& pass) const {
     return fmt::format("step {}: viscosity CG stopped at {} iterations (residual {:.3g} > {:.3g}); lower "
                        "simulation.time_step.max or raise effects.viscosity.max_iterations",
-                       ctx.step, pass.iterations, pass.residual, m_params.tolerance);
+                       ctx.step, pass.iterations, pass.residual, pass.tolerance);
 }
 
 void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
@@ -268,7 +269,7 @@ void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
     m_worstResidual = std::max(m_worstResidual, m_last.residual);
     // A cap hit is a solve that ran out of iterations above its tolerance; the exact rigid step after CG may move a
     // converged residual a little either way, which is no reason to warn.
-    if (m_last.iterations >= std::size_t(m_params.maxIterations) && m_last.residual > m_params.tolerance) {
+    if (m_last.iterations >= std::size_t(m_params.maxIterations) && m_last.residual > m_last.tolerance) {
         ++m_capHits;
         ctx.stats.warn(capMessage(ctx, m_last));
     }
@@ -306,7 +307,7 @@ std::shared_ptr<const EffectParams> readViscosity(Section& s) {
     p->boundaryMu = s.number("boundary_mu", p->boundaryMu, "Pa s", Bounds::closed(0, limits::kViscosity));
     if (p->method == Method::Explicit) {
         // Forward Euler has no solve: its only setting is how many sub-steps one step may take.
-        for (const char* key : {"tolerance", "preconditioner", "warm_start"})
+        for (const char* key : {"tolerance", "stiff_tolerance", "preconditioner", "warm_start"})
             if (s.has(key))
                 s.failAtKey(key, fmt::format("{}.{} is a setting of the implicit solvers; method 'explicit' has no "
                                              "solve",
@@ -316,6 +317,14 @@ std::shared_ptr<const EffectParams> readViscosity(Section& s) {
         return p;
     }
     p->tolerance = s.number("tolerance", p->tolerance, "relative residual", Bounds{0, 1, true, true});
+    if (p->method == Method::Weiler2018)
+        p->stiffTolerance = s.number("stiff_tolerance", p->stiffTolerance, "relative residual", Bounds{0, 1, true, true});
+    else if (s.has("stiff_tolerance"))
+        s.failAtKey("stiff_tolerance",
+                    fmt::format("{}.stiff_tolerance is a setting of weiler2018, whose clusters measure stiffness; "
+                                "{} has one tolerance",
+                                s.path(), method),
+                    "remove it, or use tolerance");
     p->maxIterations = s.integer("max_iterations", p->maxIterations, 1, 100000);
     const bool weiler = p->method == Method::Weiler2018;
     const std::string preconditioner =

@@ -26,12 +26,16 @@ struct ViscosityParams : EffectParams {
     Real boundaryMu = 0;         ///< boundary viscosity mu_b [Pa s]: 0 slips, large sticks
     /// CG stops when |r| <= tolerance |b - (I - dt A) v|, the residual relative to the correction the solve has to
     /// make. The rigid motions are solved exactly after CG, so the tolerance does not decide what happens to momentum
-    /// or spin, but it does decide how stiff a stiff fluid stays: with the fluid-wide rigid motions alone a 5e6 Pa s
-    /// body on a slipping floor kept parts moving at 10 cm/s at 1e-3 (1.4 cm/s at 1e-4); with the clusters, 1 cm/s.
-    /// At 1e-3 a viscous column at rest stays within the DFSPH tolerance (2.7 mm/s, mean compression 2.7e-6), and the
-    /// anchors' spread errors against a converged reference are 0.09 / 1.6 / 0.06-0.08 % (1e-4: 0.08 / 1.8 / 0.06 %)
-    /// with 35-55 % fewer iterations (docs/benchmarks.md).
-    Real tolerance = 1e-3;
+    /// or spin. Where the fluid is soft it mostly decides how much extra the constant-density solve does after
+    /// viscosity: at 1e-2 a viscous column at rest stays within the DFSPH tolerance (5.2 mm/s, mean compression
+    /// 6.5e-5; at 1e-3 2.7 mm/s and 2.7e-6), and the anchors' spread errors against a converged reference are
+    /// 0.09 / 1.0 / 0.2 % (at 1e-3 0.09 / 1.4 / 0.08 %; SPlisHSPlasH's 0.9 / 10 / 0.9 %) with half the CG iterations
+    /// (docs/benchmarks.md).
+    Real tolerance = 1e-2;
+    /// The tolerance of solves with stiff particles (stiffness dt mu / (rho h^2) from 3,000, where the clusters
+    /// join the preconditioner), when it is the smaller: there it decides how stiff the fluid stays. A 5e6 Pa s body
+    /// on a slipping floor kept parts moving at 3.7 cm/s at 1e-2, 0.55 cm/s at 1e-3 (with the clusters).
+    Real stiffTolerance = 1e-3;
     std::int64_t maxIterations = 100;  ///< CG iterations per solve; explicit: sub-steps per step (default 10,000)
     /// none, 3x3 block Jacobi, or block Jacobi plus a coarse space (two-level, weiler2018 only): the rigid motions of
     /// the whole fluid, or of each cluster of nearby particles (weiler2018's default; takahashi2015 defaults to
@@ -68,6 +72,7 @@ private:
 struct ViscosityPass {
     std::size_t iterations = 0;
     Real residual = 0;
+    Real tolerance = 0;  ///< the relative residual it aimed at
 };
 
 /// Dot product of two vector fields; deterministic, so every run takes the same CG iterations.

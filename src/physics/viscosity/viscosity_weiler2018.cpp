@@ -91,6 +91,10 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
             if (ctx.boundaryNeighbours.first(i) != ctx.boundaryNeighbours.last(i)) m_nearBoundary.push_back(std::uint32_t(i));
     m_rigid.build(x, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary, ctx.kernel.supportRadius());
     using P = ViscosityParams::Preconditioner;
+    // Stiff particles (as the clusters count them) tighten the solve's tolerance to the stiff one.
+    bool stiff = false;
+    for (std::size_t i = 0; i < n && !stiff; ++i) stiff = -dt * fluidBlock(i).trace() / 3 >= kStiff;
+    const Real tolerance = stiff ? std::min(m_params.tolerance, m_params.stiffTolerance) : m_params.tolerance;
     bool clusters = false;
     if (m_params.preconditioner == P::Clusters) {
         // Only stiff particles join clusters. Where viscosities differ (melting), a cluster holds one decade of them:
@@ -138,7 +142,7 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
                                 {&ctx.boundaryNeighbours, sticky() ? boundaryPairs().data() : nullptr}, x.data(),
                                 ctx.boundary.x.data(), v.data(), out.data(), dt, m_start.data(), m_guess.data());
     });
-    ViscosityPass pass = m_cg.solve(system, precondition, m_b, v, m_start, m_guess, out, m_params.tolerance,
+    ViscosityPass pass = m_cg.solve(system, precondition, m_b, v, m_start, m_guess, out, tolerance,
                                     std::size_t(m_params.maxIterations));
     if (m_cg.scale == 0) return pass;  // v_df already solves the system
     // Whatever CG left, the rigid part of the residual is solved exactly: the fluid's viscous forces then
