@@ -8,19 +8,22 @@
 // (default 0.06 m; a rope standing up to the nozzle is not laid); the N laid particles with the highest ids (default
 // 64, a few layers of the stream) are the newest laid piece, and their centroid is where the rope touches down. The
 // coil radius is that point's horizontal distance from the coil's centre, the centroid of all the laid rope (or a
-// fixed vertical axis through X, Z, such as the nozzle's), its angle the direction about it. Prints one JSON object: per frame the time, the laid particles, the touchdown height, radius
-// and angle; over the frames with T0 <= t <= T1 (default: all) the mean radius and its coefficient of variation
-// (standard deviation over mean), and the coiling frequency from the unwrapped angle when the frames are close
-// enough to follow it (every turn between frames under a quarter of a revolution).
+// fixed vertical axis through X, Z, such as the nozzle's), its angle the direction about it.
+//
+// Prints one JSON object: per frame the time, the laid particles, the touchdown height, radius and angle; over the
+// frames with T0 <= t <= T1 (default: all) the mean radius and its coefficient of variation (standard deviation over
+// mean), and the coiling frequency from the unwrapped angle when the frames are close enough to follow it (every
+// turn between frames under a quarter of a revolution; otherwise null).
 
 #include "io/particle_cache.h"
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <iostream>
 #include <limits>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -72,7 +75,16 @@ int main(int argc, char** argv) {
             const std::string arg = argv[a];
             auto value = [&] {
                 if (a + 1 >= argc) throw std::runtime_error(arg + " needs a value");
-                return std::stod(argv[++a]);
+                const std::string text = argv[++a];
+                std::size_t used = 0;
+                Real v = 0;
+                try {
+                    v = std::stod(text, &used);
+                } catch (const std::exception&) {
+                }
+                if (used == 0 || used != text.size() || !std::isfinite(v))
+                    throw std::runtime_error(arg + ": '" + text + "' is not a number");
+                return v;
             };
             if (arg == "--axis") {
                 o.axis = true;
@@ -97,7 +109,7 @@ int main(int argc, char** argv) {
         if (files.empty()) throw std::runtime_error("no particle cache given");
         std::vector<Touchdown> frames;
         for (const auto& f : files) frames.push_back(touchdown(readParticleCache(f), o));
-        Real sum = 0, squares = 0, turned = 0, widest = 0;
+        Real sum = 0, squares = 0, turned = 0, widest = 0, first = 0;
         std::size_t n = 0;
         const Touchdown* previous = nullptr;
         std::string rows;
@@ -106,6 +118,7 @@ int main(int argc, char** argv) {
                                 "\"angle\": {:.4f}}}",
                                 rows.empty() ? "" : ",\n    ", t.time, t.laid, t.height, t.radius, t.angle);
             if (t.laid == 0 || t.time < from || t.time > to) continue;
+            if (n == 0) first = t.time;
             sum += t.radius, squares += t.radius * t.radius, ++n;
             if (previous) {
                 // The turn between two frames, taken the short way round.
@@ -118,11 +131,7 @@ int main(int argc, char** argv) {
         if (n < 2) throw std::runtime_error("fewer than two frames with laid rope in the window");
         const Real mean = sum / Real(n);
         const Real cv = std::sqrt(std::max<Real>(squares / Real(n) - mean * mean, 0)) / mean;
-        const Real span = previous->time - [&] {
-            for (const Touchdown& t : frames)
-                if (t.laid > 0 && t.time >= from && t.time <= to) return t.time;
-            return previous->time;
-        }();
+        const Real span = previous->time - first;
         // Frames a quarter of a revolution or more apart may miss turns (aliasing): no frequency then.
         const std::string frequency =
             widest < 0.5 * M_PI && span > 0 ? fmt::format("{:.3f}", std::abs(turned) / (2 * M_PI) / span) : "null";

@@ -91,28 +91,26 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
             if (ctx.boundaryNeighbours.first(i) != ctx.boundaryNeighbours.last(i)) m_nearBoundary.push_back(std::uint32_t(i));
     m_rigid.build(x, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary, ctx.kernel.supportRadius());
     using P = ViscosityParams::Preconditioner;
-    // Stiff particles (as the clusters count them) tighten the solve's tolerance to the stiff one.
+    // dt A against the identity, about dt mu / (rho h^2): stiff particles join clusters and tighten the tolerance.
+    const auto stiffness = [&](std::size_t i) { return -dt * fluidBlock(i).trace() / 3; };
     bool stiff = false;
-    for (std::size_t i = 0; i < n && !stiff; ++i) stiff = -dt * fluidBlock(i).trace() / 3 >= kStiff;
+    for (std::size_t i = 0; i < n && !stiff; ++i) stiff = stiffness(i) >= kStiff;
     const Real tolerance = stiff ? std::min(m_params.tolerance, m_params.stiffTolerance) : m_params.tolerance;
     bool clusters = false;
-    if (m_params.preconditioner == P::Clusters) {
+    if (m_params.preconditioner == P::Clusters && stiff) {
         // Only stiff particles join clusters. Where viscosities differ (melting), a cluster holds one decade of them:
         // a rigid motion of solid and molten particles together is no slow mode of the system, and such clusters
         // left CG at its cap.
         m_group.resize(n);
         forEachParticle(n, [&](std::size_t i) {
-            const Real stiffness = -dt * fluidBlock(i).trace() / 3;
-            m_group[i] = stiffness < kStiff ? ClusterModes::kNoCluster
+            m_group[i] = stiffness(i) < kStiff ? ClusterModes::kNoCluster
                          : m_mu.varies()
                              ? std::uint8_t(std::min(std::floor(std::log10(std::max(m_mu(i), Real(1)))), 254.0))
                              : std::uint8_t(0);
         });
-        if (std::any_of(m_group.begin(), m_group.end(), [](std::uint8_t g) { return g != ClusterModes::kNoCluster; })) {
-            m_clusters.build(x, &m_group, kClusterSize * ctx.kernel.supportRadius(), maxClusters(n),
-                             ctx.fluidNeighbours, pairs(), dt, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary);
-            clusters = m_clusters.clusters() > 0;
-        }
+        m_clusters.build(x, &m_group, kClusterSize * ctx.kernel.supportRadius(), maxClusters(n), ctx.fluidNeighbours,
+                         pairs(), dt, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary);
+        clusters = m_clusters.clusters() > 0;
     }
     // z = P r: the block diagonal, plus (two-level) the exact answer within the rigid motions of its clusters or,
     // without clusters, of the whole fluid, which the block diagonal of a stiff fluid barely moves (their
