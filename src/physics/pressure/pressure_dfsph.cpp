@@ -89,21 +89,26 @@ void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles) {
     addBoundaryLoads(ctx, particles, *m_pressure);
 }
 
-void PressureDFSPH::warnCapHit(StepContext& ctx, Solve which, std::size_t iterations, Real error) const {
+bool PressureDFSPH::finished(StepContext& ctx, Solve which, std::size_t iteration, Real error) const {
     const bool density = which == Solve::Density;
-    ++(density ? ctx.stats.pressureCapHits : ctx.stats.divergenceCapHits);
-    ctx.stats.warn(fmt::format("step {}: {} solve stopped at {} iterations (mean error {:.3g} > {:.3g}); lower "
-                               "simulation.time_step.max or raise simulation.pressure.max_iterations",
-                               ctx.step, density ? "constant-density" : "divergence-free", iterations, error,
-                               density ? m_settings.densityError : m_settings.divergenceError));
+    const Real tolerance = density ? m_settings.densityError : m_settings.divergenceError;
+    const auto fewest = std::size_t(density ? m_settings.minIterations : m_settings.minDivergenceIterations);
+    const bool converged = error <= tolerance;
+    if (converged && iteration >= fewest) return true;
+    if (iteration < std::size_t(m_settings.maxIterations)) return false;
+    if (!converged) {
+        ++(density ? ctx.stats.pressureCapHits : ctx.stats.divergenceCapHits);
+        ctx.stats.warn(fmt::format("step {}: {} solve stopped at {} iterations (mean error {:.3g} > {:.3g}); lower "
+                                   "simulation.time_step.max or raise simulation.pressure.max_iterations",
+                                   ctx.step, density ? "constant-density" : "divergence-free", iteration, error,
+                                   tolerance));
+    }
+    return true;
 }
 
 template <class Target>
 std::size_t PressureDFSPH::solveJacobi(Solve which, StepContext& ctx, ParticleSet& particles,
                                        std::vector<Real>& pressure, Target target) {
-    const Real tolerance = which == Solve::Density ? m_settings.densityError : m_settings.divergenceError;
-    const auto fewest = std::size_t(which == Solve::Density ? m_settings.minIterations
-                                                            : m_settings.minDivergenceIterations);
     const std::size_t n = particles.size();
     const Real dt = ctx.dt;
     auto& v = particles.v();
@@ -121,12 +126,7 @@ std::size_t PressureDFSPH::solveJacobi(Solve which, StepContext& ctx, ParticleSe
                             ctx.restDensity[i];
         });
         const Real error = deterministicSum(n, [&](std::size_t i) { return m_residual[i]; }) / Real(n);
-        const bool converged = error <= tolerance;
-        if ((converged && iteration >= fewest) ||
-            iteration >= std::size_t(m_settings.maxIterations)) {
-            if (!converged) warnCapHit(ctx, which, iteration, error);
-            return iteration;
-        }
+        if (finished(ctx, which, iteration, error)) return iteration;
         // Projected Jacobi step: the pressure of a particle never goes below zero.
         forEachParticle(n, [&](std::size_t i) {
             const Real next = std::max<Real>(pressure[i] + kRelaxation * m_error[i] * m_factor[i] / (dt * dt), 0);
@@ -148,9 +148,6 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     // gradient steps on the particles under pressure, a projected gradient step when a step would make a pressure
     // negative, and proportioning steps that give pressure to particles their neighbours compress. Diagonally
     // preconditioned by the DFSPH factor (1 / A_ii). Every product with A costs what one Jacobi sweep does.
-    const Real tolerance = which == Solve::Density ? m_settings.densityError : m_settings.divergenceError;
-    const auto fewest = std::size_t(which == Solve::Density ? m_settings.minIterations
-                                                            : m_settings.minDivergenceIterations);
     const std::size_t n = particles.size();
     const Real dt2 = ctx.dt * ctx.dt;
     const auto& rho0 = ctx.restDensity;
@@ -197,12 +194,7 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     bool restart = true;
     std::size_t iteration = 0;
     for (Real error = meanError();; error = meanError()) {
-        const bool converged = error <= tolerance;
-        if ((converged && iteration >= fewest) ||
-            iteration >= std::size_t(m_settings.maxIterations)) {
-            if (!converged) warnCapHit(ctx, which, iteration, error);
-            break;
-        }
+        if (finished(ctx, which, iteration, error)) break;
         ++iteration;
         // Proportional: the chopped gradient is small against what the free particles can still move.
         const Real chop = sum([&](std::size_t i) { return chopped(i) * chopped(i) * inverseD(i); });

@@ -49,7 +49,9 @@ private:
                          std::vector<Vec3>& out) const;
     // Adds the impulse the pressures `s` gave through the boundary to each body's load.
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const;
-    void warnCapHit(StepContext& ctx, Solve which, std::size_t iterations, Real error) const;
+    // Whether a solve with this mean residual stops after `iteration` iterations (the tolerance reached and the
+    // fewest done, or the cap); a stop at the cap above the tolerance is counted and warned of.
+    bool finished(StepContext& ctx, Solve which, std::size_t iteration, Real error) const;
 
     PressureSettings m_settings;
     std::vector<Real> m_factor;     // 1 / A_ii, 0 where it vanishes (lone particles)
