@@ -16,6 +16,7 @@
 // turn between frames under a quarter of a revolution; otherwise null).
 
 #include "io/particle_cache.h"
+#include "tool_args.h"
 
 #include <fmt/format.h>
 
@@ -75,16 +76,7 @@ int main(int argc, char** argv) {
             const std::string arg = argv[a];
             auto value = [&] {
                 if (a + 1 >= argc) throw std::runtime_error(arg + " needs a value");
-                const std::string text = argv[++a];
-                std::size_t used = 0;
-                Real v = 0;
-                try {
-                    v = std::stod(text, &used);
-                } catch (const std::exception&) {
-                }
-                if (used == 0 || used != text.size() || !std::isfinite(v))
-                    throw std::runtime_error(arg + ": '" + text + "' is not a number");
-                return v;
+                return tools::number(arg, argv[++a]);
             };
             if (arg == "--axis") {
                 o.axis = true;

@@ -9,7 +9,7 @@ STEPS steps (default 20) from its first contact with the floor (the bunny starts
 measured step has an impact's work); the paper averages whole animations, so its early free fall is in its figures
 and not here. Environment: GANACHE (default build/src/ganache), THREADS (default 2), STEPS, OUT (default
 out/table2). The coiling (25k) and buckling (80k) rows are emitter scenes that reach the paper's counts only after
-seconds of simulated time; they are not measured here.
+seconds of simulated time; they are not measured here but by running their scenes at final quality (docs/paper.md).
 """
 import json
 import os
