@@ -90,10 +90,7 @@ int main(int argc, char** argv) {
     try {
         for (int a = 1; a < argc; ++a) {
             const std::string arg = argv[a];
-            auto value = [&] {
-                if (a + 1 >= argc) throw std::runtime_error(arg + " needs a value");
-                return tools::number(arg, argv[++a]);
-            };
+            auto value = [&] { return tools::nextNumber(argc, argv, a); };
             if (arg == "--slow") o.slow = value();
             else if (arg == "--below") o.below = value();
             else if (arg == "--reverse") o.reverse = value();

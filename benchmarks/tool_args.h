@@ -22,4 +22,11 @@ inline Real number(const std::string& option, const std::string& text) {
     return v;
 }
 
+/// The number after option argv[a] (which it steps past), or a runtime_error when it is missing or not a number.
+inline Real nextNumber(int argc, char** argv, int& a) {
+    const std::string option = argv[a];
+    if (a + 1 >= argc) throw std::runtime_error(option + " needs a value");
+    return number(option, argv[++a]);
+}
+
 }  // namespace ganache::tools
