@@ -11,6 +11,7 @@
 namespace ganache {
 
 class ParticleSet;
+class UniformGrid;
 struct StepContext;
 
 class Contact {
@@ -18,8 +19,9 @@ public:
     explicit Contact(Real particleRadius) : m_radius(particleRadius) {}
     /// Takes out of each particle's velocity the approach to a boundary that would bring it closer than one
     /// particle radius to its nearest boundary particle (along the wall's normal) or 3/4 of a radius to any, and
-    /// gives it to the body. Counts the contacts in ctx.stats.boundaryContacts.
-    void apply(StepContext& ctx, ParticleSet& particles);
+    /// gives it to the body. Counts the contacts in ctx.stats.boundaryContacts. `grid` holds the boundary particles
+    /// where they are now: particles fast enough to outrun their neighbour lists look for walls in it.
+    void apply(StepContext& ctx, ParticleSet& particles, const UniformGrid& grid);
 
 private:
     Real m_radius;

@@ -153,7 +153,9 @@ private:
     void runStage(Stage stage, StepContext& ctx, const char* checkName);
     void updateNeighbours(bool mayReorder);
     void computeDensities();
-    Real chooseDt(Real maxDt) const;
+    /// The longest step the CFL condition allows at the current velocities (infinite at rest).
+    Real cflStep() const;
+    Real chooseDt(Real maxDt, Real cflStep) const;
     void removeEscaped();
     void divergenceFree(StepContext& ctx);
     void moveBoundaries(Real t);

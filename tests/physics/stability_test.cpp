@@ -134,6 +134,20 @@ TEST(Stability, TenMetresPerSecondImpact) {
                 });
 }
 
+TEST(Stability, ParticleThrownAtAWallFromBeyondItsNeighbourhoodStopsAtIt) {
+    // One particle 3 cm above the tank's floor (1.5 kernel supports: no boundary particle in its neighbour list) at
+    // 20 m/s straight down, with 5 ms steps: 10 cm in a step, far past the CFL limit. The contact rule must find the
+    // floor along the particle's whole reach, not only among its neighbours.
+    World world(radius(), Vec3(-0.1, -0.1, -0.1), Vec3(0.3, 0.4, 0.3));
+    world.block(Vec3(0.1, 0.03, 0.1) - Vec3::Constant(radius()), Vec3(0.1, 0.03, 0.1) + Vec3::Constant(radius()),
+                preset("honey"), 20, Vec3(0, -20, 0));
+    world.box("tank", kTankLo, kTankHi);
+    world.setup.timeStep.fixedDt = 0.005;
+    Simulation sim = world.simulation();
+    ASSERT_EQ(sim.particles().size(), 1u);
+    runAndCheck("thrown", world, 0.02);
+}
+
 TEST(Stability, CoincidentParticles) {
     // Every fourth particle moved onto its neighbour: pairs at zero distance (their kernel gradient is zero,
     // their density doubled); the solver must separate them without producing NaN.
@@ -287,3 +301,4 @@ TEST(Stability, StiffBodyWithAThinArmRestsOnASlippingFloor) {
     EXPECT_LT(std::abs(spin / inertia), 0.01);
     EXPECT_LT(maxSpeed(p), 0.05);
 }
+

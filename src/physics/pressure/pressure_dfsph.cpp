@@ -82,7 +82,9 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     });
 }
 
-void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles) {
+void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Real scale) {
+    if (scale != 1)
+        for (Real& s : *m_pressure) s *= scale;
     auto& v = particles.v();
     velocityChanges(ctx, particles, *m_pressure, m_velocityChange);
     forEachParticle(particles.size(), [&](std::size_t i) { v[i] += m_velocityChange[i]; }, 4096);

@@ -17,9 +17,9 @@ public:
     /// DFSPH factors 1 / (|sum m grad W + kWall sum Psi grad W|^2 + sum |m grad W|^2) at the current
     /// positions [BK17 Eq. 11].
     void computeFactors(const StepContext& ctx, const ParticleSet& particles);
-    /// Applies the previous step's constant-density pressure to the velocities: the warm start of this step's
-    /// constant-density solve.
-    void applyWarmStart(StepContext& ctx, ParticleSet& particles);
+    /// Applies the previous step's constant-density pressure, times `scale`, to the velocities: the warm start of
+    /// this step's constant-density solve.
+    void applyWarmStart(StepContext& ctx, ParticleSet& particles, Real scale);
     /// Constant-density solve on the predicted velocities, before advection, from the pressures applied so far
     /// (the warm start, and earlier passes of the step).
     void solveDensity(StepContext& ctx, ParticleSet& particles);
