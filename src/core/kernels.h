@@ -39,6 +39,11 @@ public:
 
     Real W0() const { return m_k; }  ///< W at r = 0
 
+    /// W and gradFactor of n distances at once, without branches so that the loop vectorises: takes the squared
+    /// distances in r2 and leaves the gradient factors there, the values in w. Bit for bit what W and gradFactor
+    /// give for r = sqrt(r2).
+    void valuesAndGradients(std::size_t n, Real* r2, Real* w) const;
+
 private:
     Real m_h;
     Real m_invH;  // 1 / h: W and its gradient multiply by it, leaving one division a pair

@@ -179,22 +179,28 @@ void Simulation::computeDensities() {
     const auto& rho0 = *m_restDensity;
     const auto& f = m_fluidNeighbours;
     const auto& b = m_boundaryNeighbours;
-    forEachParticle(n, [&](std::size_t i) {
-        // rho_i = sum_j m_j W_ij + sum_k Psi_k W_ik, with Psi_k = rho_0 V_k [AIA+12]
-        Real rho = m[i] * m_kernel.W0();
-        for (std::size_t p = f.first(i); p < f.last(i); ++p) {
-            const std::uint32_t j = f.indices[p];
-            const Real r = (x[i] - x[j]).norm();
-            rho += m[j] * m_kernel.W(r);
-            m_gradients.fluid[p] = m_kernel.gradFactor(r);
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        // The squared distances of the block's pairs first, then the kernel on all of them in one vectorised pass,
+        // then the sums: rho_i = sum_j m_j W_ij + sum_k Psi_k W_ik, with Psi_k = rho_0 V_k [AIA+12].
+        const std::size_t f0 = f.first(begin), nf = f.first(end) - f0, b0 = b.first(begin), nb = b.first(end) - b0;
+        thread_local std::vector<Real> wf, wb;
+        wf.resize(nf), wb.resize(nb);
+        Real* gf = m_gradients.fluid.data() + f0;
+        Real* gb = m_gradients.boundary.data() + b0;
+        for (std::size_t i = begin; i < end; ++i) {
+            for (std::size_t p = f.first(i); p < f.last(i); ++p) gf[p - f0] = (x[i] - x[f.indices[p]]).squaredNorm();
+            for (std::size_t p = b.first(i); p < b.last(i); ++p)
+                gb[p - b0] = (x[i] - m_boundary.x[b.indices[p]]).squaredNorm();
         }
-        for (std::size_t p = b.first(i); p < b.last(i); ++p) {
-            const std::uint32_t k = b.indices[p];
-            const Real r = (x[i] - m_boundary.x[k]).norm();
-            rho += rho0[i] * m_boundary.volume[k] * m_kernel.W(r);
-            m_gradients.boundary[p] = m_kernel.gradFactor(r);
+        m_kernel.valuesAndGradients(nf, gf, wf.data());
+        m_kernel.valuesAndGradients(nb, gb, wb.data());
+        for (std::size_t i = begin; i < end; ++i) {
+            Real rho = m[i] * m_kernel.W0();
+            for (std::size_t p = f.first(i); p < f.last(i); ++p) rho += m[f.indices[p]] * wf[p - f0];
+            for (std::size_t p = b.first(i); p < b.last(i); ++p)
+                rho += rho0[i] * m_boundary.volume[b.indices[p]] * wb[p - b0];
+            m_density[i] = rho;
         }
-        m_density[i] = rho;
     });
 }
 

@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <vector>
+
 using namespace ganache;
 
 namespace {
@@ -54,6 +57,23 @@ TEST(CubicSpline, GradientMatchesCentralDifference) {
             // Central differences err by O(e^2 W'''), about 1e-9 relative here.
             EXPECT_NEAR(w.gradW(r)[axis], fd, 1e-6 * std::max<Real>(1, std::abs(fd)));
         }
+    }
+}
+
+TEST(CubicSpline, BulkEvaluationIsBitForBitTheScalarOne) {
+    // The solvers take the step's kernel values through the vectorised bulk form; a simulation's bytes must not
+    // change with it. Distances cover both pieces, their seam, zero, below the zero-gradient guard, and the support's
+    // edge and beyond; more than one SIMD vector, with a remainder.
+    const CubicSpline w(0.1);
+    std::vector<Real> r = {0, 1e-14, 1e-12, 0.001, 0.02, 0.05 - 1e-15, 0.05, 0.05 + 1e-15, 0.0731, 0.099999, 0.1, 0.13};
+    for (int k = 0; k < 23; ++k) r.push_back(0.1 * std::sqrt((k + 0.5) / 23));
+    std::vector<Real> r2(r.size()), values(r.size());
+    for (std::size_t p = 0; p < r.size(); ++p) r2[p] = r[p] * r[p];
+    w.valuesAndGradients(r2.size(), r2.data(), values.data());
+    for (std::size_t p = 0; p < r.size(); ++p) {
+        const Real rp = std::sqrt(r[p] * r[p]);
+        EXPECT_EQ(values[p], w.W(rp)) << "r = " << r[p];
+        EXPECT_EQ(r2[p], w.gradFactor(rp)) << "r = " << r[p];
     }
 }
 
