@@ -86,6 +86,8 @@ void RunReport::setSimulation(const SolverStats& s, double simulatedTime, const 
                               {"particles_removed", s.removedParticles},
                               {"particles_added", s.addedParticles},
                               {"boundary_contacts", s.boundaryContacts},
+                              {"steps_past_cfl", s.stepsPastCfl},
+                              {"cfl_excess_max", s.cflExcess},
                               {"fluid_particles_at_end", finalFluid},
                               {"warning_count", s.warningCount}};
     m_warnings.insert(m_warnings.end(), s.warnings.begin(), s.warnings.end());
@@ -143,6 +145,8 @@ std::string RunReport::json() const {
                            {"particles_removed", simulation["particles_removed"]},
                            {"particles_added", simulation["particles_added"]},
                            {"boundary_contacts", simulation["boundary_contacts"]},
+                           {"steps_past_cfl", simulation["steps_past_cfl"]},
+                           {"cfl_excess_max", simulation["cfl_excess_max"]},
                            {"fluid_particles_at_end", simulation["fluid_particles_at_end"]},
                            {"warning_count", simulation["warning_count"]}};
     j["bodies"] = m_data->bodies;

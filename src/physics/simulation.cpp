@@ -277,6 +277,16 @@ void Simulation::step(Real maxDt) {
     const Real limit = cflStep();
     const Real dt = chooseDt(maxDt, limit);
     StepContext ctx = context(dt);
+    if (dt > limit) {
+        // Said once a run, then counted (report.json: simulation.steps_past_cfl, cfl_excess_max).
+        if (m_stats.stepsPastCfl++ == 0)
+            m_stats.warn(fmt::format("step {}: the time step {:.3g} s is {:.2g} times what the CFL condition allows at "
+                                     "the fastest particle's {:.3g} m/s; particles outrun their neighbourhoods and the "
+                                     "pressure solves lose accuracy; lower simulation.time_step.{}",
+                                     m_step, dt, dt / limit, m_timeStep.cfl * 2 * m_particleRadius / limit,
+                                     m_timeStep.fixedDt > 0 ? "fixed" : "min"));
+        m_stats.cflExcess = std::max(m_stats.cflExcess, dt / limit);
+    }
     m_loads.clear(m_boundary.names.size());
     runStage(Stage::Start, ctx, "start-of-step");
     const bool viscous = !m_stages[std::size_t(Stage::Viscosity)].empty();

@@ -40,6 +40,8 @@ struct SolverStats {
     std::size_t removedParticles = 0;  ///< left the domain
     std::size_t addedParticles = 0;    ///< added during the run (emitters)
     std::size_t boundaryContacts = 0;  ///< approaches to a boundary stopped at one particle radius
+    std::size_t stepsPastCfl = 0;      ///< steps longer than the CFL condition allows (a fixed or minimum step)
+    Real cflExcess = 0;                ///< the largest dt / CFL step among them
     Real dtMin = std::numeric_limits<Real>::infinity(), dtMax = 0;
     StageTimes time;
     std::vector<std::string> warnings;  ///< the first kMaxWarnings, then only counted

@@ -128,6 +128,24 @@ TEST(Stability, FiveMillisecondStepsAtHighViscosity) {
     runAndCheck("dt5ms", world, 0.3);
 }
 
+TEST(Stability, StepsPastTheCflLimitAreSaidOnceAndCounted) {
+    // The same block with 5 ms steps lands at 1 m/s, past what the CFL condition allows at r = 5 mm (4 ms); with
+    // the adaptive step it never is.
+    World world = blockInTank(1.0e4);
+    world.setup.timeStep.fixedDt = 0.005;
+    Simulation fixed = world.simulation();
+    fixed.advanceTo(0.3);
+    const SolverStats& s = fixed.stats();
+    EXPECT_GT(s.stepsPastCfl, 0u);
+    EXPECT_GT(s.cflExcess, 1.0);
+    std::size_t said = 0;
+    for (const std::string& w : s.warnings) said += w.find("simulation.time_step.fixed") != std::string::npos;
+    EXPECT_EQ(said, 1u);
+    Simulation adaptive = blockInTank(1.0e4).simulation();
+    adaptive.advanceTo(0.3);
+    EXPECT_EQ(adaptive.stats().stepsPastCfl, 0u);
+}
+
 TEST(Stability, TenMetresPerSecondImpact) {
     runAndCheck("impact", blockInTank(100, 100), 0.1, [](ParticleSet& p) {
                     for (Vec3& v : p.v()) v = Vec3(0, -10, 0);
