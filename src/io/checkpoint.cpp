@@ -17,7 +17,8 @@ namespace ganache {
 namespace {
 
 constexpr char kMagic[8] = {'G', 'N', 'C', 'H', 'C', 'K', 'P', 'T'};
-constexpr std::uint32_t kVersion = 4;  // 2: effects save their own state; 3: the viscosity warm start's steps; 4: steps past the CFL limit
+// 2: effects save their own state; 3: the viscosity warm start's steps; 4: steps past the CFL limit
+constexpr std::uint32_t kVersion = 4;
 
 // Writing and reading share one description of the state (fields() below): the same calls on a ByteWriter append
 // each value, on a ByteReader take it back, so the two can never disagree on the order.
@@ -69,8 +70,8 @@ void fields(Reader& io, ParticleSet& p) {
 template <class IO, class Stats>
 void statsFields(IO& io, Stats& s) {
     io(s.steps), io(s.pressureIterations), io(s.pressureCapHits), io(s.divergenceIterations),
-        io(s.divergenceCapHits), io(s.removedParticles), io(s.addedParticles), io(s.boundaryContacts), io(s.stepsPastCfl),
-        io(s.cflExcess), io(s.dtMin), io(s.dtMax);
+        io(s.divergenceCapHits), io(s.removedParticles), io(s.addedParticles), io(s.boundaryContacts),
+        io(s.stepsPastCfl), io(s.cflExcess), io(s.dtMin), io(s.dtMax);
     auto& t = s.time;
     io(t.pressure), io(t.advect), io(t.neighbours), io(t.divergence);
     io(s.warnings), io(s.warningCount);

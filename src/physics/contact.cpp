@@ -21,8 +21,9 @@ void forEachPointWithin(const UniformGrid& grid, const Vec3& c, Real radius, Vis
     if (cells > Real(grid.cellCount())) {  // a very long reach: fewer occupied cells than cells in the cube
         for (std::size_t cell = 0; cell < grid.cellCount(); ++cell) {
             const auto& cc = grid.cellCoords(cell);
-            if (cc[0] >= lo[0] && cc[0] <= hi[0] && cc[1] >= lo[1] && cc[1] <= hi[1] && cc[2] >= lo[2] && cc[2] <= hi[2])
-                visitCell(cell);
+            bool inside = true;
+            for (int a = 0; a < 3; ++a) inside = inside && cc[a] >= lo[a] && cc[a] <= hi[a];
+            if (inside) visitCell(cell);
         }
         return;
     }

@@ -299,10 +299,10 @@ void Simulation::step(Real maxDt) {
     {
         ScopedTimer t(m_stats.time.pressure);
         // The warm start carries last step's pressures into this step's neighbourhoods. Beyond the CFL limit (a
-        // fixed step the scene chose) particles outrun them: whole, they threw single particles out of a honey block
-        // landing at 1 m/s at 5-20 m/s, one through the tank's floor (5 ms steps at r = 2.5 mm, 2.5x the limit).
-        // There the warm start shrinks with the excess. Within the limit it stays whole: halved always, as
-        // SPlisHSPlasH does, it cost the anchors 15-30 % more pressure iterations a step.
+        // fixed or minimum step the scene chose) particles outrun them: whole, they threw single particles out of a
+        // honey block landing at 1 m/s at 5-20 m/s, one through the tank's floor (5 ms steps at r = 2.5 mm, 2.5x
+        // the limit). There the warm start shrinks with the excess. Within the limit it stays whole: halved always,
+        // as SPlisHSPlasH does, it cost the anchors 15-30 % more pressure iterations a step.
         m_pressure->applyWarmStart(ctx, m_fluid, dt > limit ? limit / dt : 1);
     }
     // Predicted: viscosity acts on the velocity that already carries this step's forces and the pressure that held

@@ -94,8 +94,8 @@ void expectStable(const Simulation& sim, const Snapshot& start, const Vec3& lo, 
 
 const Vec3 kTankLo(0, 0, 0), kTankHi(0.2, 0.3, 0.2);
 
-// A 10 x 10 x 10 block of honey (r = 5 mm; 10k per side at refinement k) in a closed tank of 0.2 m, falling under gravity, with viscosity mu
-// (and boundary viscosity boundaryMu); none when mu is negative.
+// A 10 x 10 x 10 block of honey (r = 5 mm; 10 k particles a side at refinement k) in a closed tank of 0.2 m,
+// falling under gravity, with viscosity mu (and boundary viscosity boundaryMu); none when mu is negative.
 World blockInTank(Real mu, Real boundaryMu = 0) {
     World world(radius(), Vec3(-0.1, -0.1, -0.1), Vec3(0.3, 0.4, 0.3));
     world.block(Vec3(0.05, 0.05, 0.05), Vec3(0.15, 0.15, 0.15), preset("honey"));
