@@ -1,9 +1,9 @@
 // What surfacing one frame costs, per method, at 200k and 1M particles (issue 6's benchmark).
 // The frame: a viscous puddle, half an oblate ellipsoid three times as wide as it is high, filled with a lattice
 // of spacing 2r (r = 5 mm) jittered by up to 0.2 r per axis; default surface settings (voxel 0.5 r, two smoothing
-// passes, a mesh without adaptivity). Reported per frame: core-microseconds per particle (wall time x threads /
-// particles), the share of each part (level set, smoothing, mesh), triangles, the level set's active voxels, and the peak resident memory the
-// frame added on top of its particles.
+// passes, each method's default adaptivity). Reported per frame: core-microseconds per particle (wall time x threads
+// / particles), the share of each part (level set, smoothing, mesh), triangles, the level set's active voxels, and
+// the peak resident memory the frame added on top of its particles.
 // Run one benchmark per process for honest memory peaks, e.g.
 //   build/benchmarks/surface_bench --benchmark_counters_tabular=true --benchmark_filter='surface/2/200000/2'
 // meshFile: writing and reading a frame's mesh as OBJ or binary PLY (--benchmark_filter=meshFile).
@@ -66,6 +66,7 @@ void surface(benchmark::State& state) {
     SurfaceSettings settings;
     settings.requested = true;
     settings.method = method;
+    settings.adaptivity = defaultAdaptivity(method);
     SurfaceTimings sum;
     std::size_t triangles = 0, voxels = 0;
     resetPeakMemory();
