@@ -193,7 +193,7 @@ TEST(Stability, PaddleSpinningAtTwentyRadiansPerSecond) {
     BodyMotion spin;
     spin.centre = Vec3(0.1, 0, 0.1);
     spin.angularVelocity = 20;
-    world.box("paddle", Vec3(0.06, 0.03, 0.095), Vec3(0.14, 0.2, 0.105), false, spin);
+    world.solid("paddle", Vec3(0.06, 0.03, 0.095), Vec3(0.14, 0.2, 0.105), spin);
     world.block(Vec3(0.01, 0.01, 0.01), Vec3(0.19, 0.09, 0.19), preset("honey"));
     world.effect<GravityParams>("gravity");
     ViscosityParams& v = world.effect<ViscosityParams>("viscosity");
