@@ -27,15 +27,21 @@ void forEachBlock(std::size_t n, F&& f, std::size_t grain = 512) {
                       [&](const auto& r) { f(r.begin(), r.end()); });
 }
 
+/// f(begin, end) over fixed blocks of [0, n), the blocks' results joined by `join` (associative: a sum, a minimum, or
+/// several at once) in an order that does not depend on the thread count. f may write the slots of its block.
+template <class T, class F, class Join>
+T deterministicBlockReduce(std::size_t n, F&& f, T zero, Join join) {
+    return tbb::parallel_deterministic_reduce(
+        tbb::blocked_range<std::size_t>(0, n, 2048), zero,
+        [&](const auto& r, T s) { return join(s, f(r.begin(), r.end())); }, join);
+}
+
 /// sum over fixed blocks [begin, end) of [0, n) of f(begin, end), deterministic for any thread count (the blocks and
 /// the order their sums combine in do not depend on it); f may write the slots of its block, so a loop that updates
 /// vectors also returns their dot products without a second pass.
 template <class T = Real, class F>
 T deterministicBlockSum(std::size_t n, F&& f, T zero = T(0)) {
-    return tbb::parallel_deterministic_reduce(
-        tbb::blocked_range<std::size_t>(0, n, 2048), zero,
-        [&](const auto& r, T s) { return T(s + f(r.begin(), r.end())); },
-        [](const T& a, const T& b) -> T { return a + b; });
+    return deterministicBlockReduce<T>(n, f, zero, [](const T& a, const T& b) -> T { return a + b; });
 }
 
 /// sum_i term(i), deterministic for any thread count; T is any type with + and a zero (Real, Eigen vectors). term may

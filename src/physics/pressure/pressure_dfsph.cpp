@@ -162,80 +162,111 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     for (auto* a : {&e, &dir, &q, &z}) a->assign(n, 0);
     dv.resize(n);
     std::size_t products = 0;
-    // q = dt^2 A d, with dv = -dt J^T d the velocity change of the pressures d.
+    // dt^2 A d = -dt J dv with dv = -dt J^T d the velocity change of the pressures d: the sweeps leave J dv in q, and
+    // the pass after them scales it. Every pass over the particles also takes the sums the next decision needs: at
+    // 8k particles the vector passes around the sweeps cost about as much as the sweeps when each had its own loop.
     auto multiply = [&](const std::vector<Real>& d) {
         velocityChanges(ctx, particles, d, dv);
         rates(ctx, particles, dv, false, q);
-        forEachParticle(n, [&](std::size_t i) { q[i] *= -ctx.dt; }, 4096);
         ++products;
     };
-    auto sum = [&](auto term) { return deterministicSum(n, term); };
     // D_i = dt^2 A_ii; particles without neighbours (factor 0) take no pressure.
     auto inverseD = [&](std::size_t i) { return m_factor[i] / dt2; };
-    // Moves the pressures by -alpha d, d being the direction whose product is in q and dv.
-    auto move = [&](Real alpha, const std::vector<Real>& d) {
-        forEachParticle(n, [&](std::size_t i) {
-            pressure[i] = std::max<Real>(pressure[i] - alpha * d[i], 0);  // the max: round-off at the bound
-            e[i] += alpha * q[i];
-            v[i] -= alpha * dv[i];
-        }, 4096);
+    // Moves particle i's pressure by -alpha d_i, d being the direction whose product is in q and dv.
+    auto moveOne = [&](std::size_t i, Real alpha, const std::vector<Real>& d) {
+        pressure[i] = std::max<Real>(pressure[i] - alpha * d[i], 0);  // the max: round-off at the bound
+        e[i] += alpha * q[i];
+        v[i] -= alpha * dv[i];
     };
     // Gradient on the particles under pressure (free), and on those at zero pressure that want some (chopped).
     auto free = [&](std::size_t i) { return pressure[i] > 0 ? -e[i] : Real(0); };
     auto chopped = [&](std::size_t i) {
         return pressure[i] > 0 || m_factor[i] == 0 ? Real(0) : std::min<Real>(-e[i], 0);
     };
-    // The complementarity residual of the Jacobi solver: |projected gradient| relative to rho_0. Counting only
-    // compression (SPlisHSPlasH's test) takes 37 % fewer iterations on the 50k anchor block, but a honey column at
-    // rest then jitters at 1.9 cm/s instead of 0.3 and sits 6x more compressed at the same 0.01 %.
-    auto meanError = [&] { return sum([&](std::size_t i) { return std::abs(free(i) + chopped(i)) / rho0[i]; }) / Real(n); };
+    // Particle i's share of what the next iteration decides on: the complementarity residual of the Jacobi solver
+    // (|projected gradient| relative to rho_0; counting only compression, SPlisHSPlasH's test, takes 37 % fewer
+    // iterations on the 50k anchor block, but a honey column at rest then jitters at 1.9 cm/s instead of 0.3 and
+    // sits 6x more compressed at the same 0.01 %), the chopped gradient's energy, and how far the free particles
+    // can still move.
+    auto measure = [&](std::size_t i) {
+        const Real f = free(i), c = chopped(i), d = inverseD(i);
+        const Real room = pressure[i] > 0 ? std::min(pressure[i] / (kRelaxation * d), f) * f * d : Real(0);
+        return Vec3(std::abs(f + c) / rho0[i], c * c * d, room);
+    };
+    // update(i) on every particle, then the sum of measure(i) after it.
+    auto updateAndMeasure = [&](auto update) {
+        return deterministicSum<Vec3>(n, [&](std::size_t i) {
+            update(i);
+            return measure(i);
+        }, Vec3::Zero());
+    };
     constexpr Real kGamma = 1;  // proportioning threshold
 
     rates(ctx, particles, v, true, m_rate);
-    forEachParticle(n, [&](std::size_t i) { e[i] = target(i, m_rate[i]); }, 4096);
+    Vec3 measured = updateAndMeasure([&](std::size_t i) { e[i] = target(i, m_rate[i]); });
     bool restart = true;
     std::size_t iteration = 0;
-    for (Real error = meanError();; error = meanError()) {
-        if (finished(ctx, which, iteration, error)) break;
+    for (;;) {
+        if (finished(ctx, which, iteration, measured[0] / Real(n))) break;
         ++iteration;
         // Proportional: the chopped gradient is small against what the free particles can still move.
-        const Real chop = sum([&](std::size_t i) { return chopped(i) * chopped(i) * inverseD(i); });
-        const Real room = sum([&](std::size_t i) {
-            if (pressure[i] <= 0) return Real(0);
-            return std::min(pressure[i] / (kRelaxation * inverseD(i)), free(i)) * free(i) * inverseD(i);
-        });
-        if (chop > kGamma * kGamma * room) {
+        if (measured[1] > kGamma * kGamma * measured[2]) {
             // Proportioning: release the particles at zero pressure that their neighbours compress.
             forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * chopped(i); }, 4096);
             multiply(z);
-            const Real zq = sum([&](std::size_t i) { return z[i] * q[i]; });
-            if (!(zq > 0)) break;
-            move(sum([&](std::size_t i) { return chopped(i) * z[i]; }) / zq, z);
+            using Vec2 = Eigen::Matrix<Real, 2, 1>;
+            const Vec2 zq = deterministicSum<Vec2>(n, [&](std::size_t i) {
+                q[i] *= -ctx.dt;
+                return Vec2(z[i] * q[i], chopped(i) * z[i]);
+            }, Vec2::Zero());
+            if (!(zq[0] > 0)) break;
+            measured = updateAndMeasure([&](std::size_t i) { moveOne(i, zq[1] / zq[0], z); });
             restart = true;
             continue;
         }
         if (restart) forEachParticle(n, [&](std::size_t i) { dir[i] = inverseD(i) * free(i); }, 4096);
         restart = false;
         multiply(dir);
-        const Real dq = sum([&](std::size_t i) { return dir[i] * q[i]; });
-        if (!(dq > 0)) break;  // nothing left to move
-        const Real step = sum([&](std::size_t i) { return free(i) * dir[i]; }) / dq;
-        Real feasible = std::numeric_limits<Real>::infinity();  // the longest step that keeps every pressure >= 0
-        for (std::size_t i = 0; i < n; ++i)
-            if (dir[i] > 0) feasible = std::min(feasible, pressure[i] / dir[i]);
-        if (step <= feasible) {
-            move(step, dir);
-            forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * free(i); }, 4096);
-            const Real beta = sum([&](std::size_t i) { return z[i] * q[i]; }) / dq;
-            forEachParticle(n, [&](std::size_t i) { dir[i] = z[i] - beta * dir[i]; }, 4096);
+        // d . q, free . d, and the longest step that keeps every pressure >= 0.
+        struct Sums {
+            Real dq = 0, fd = 0, feasible = std::numeric_limits<Real>::infinity();
+        };
+        const Sums sums = deterministicBlockReduce<Sums>(
+            n,
+            [&](std::size_t begin, std::size_t end) {
+                Sums s;
+                for (std::size_t i = begin; i < end; ++i) {
+                    q[i] *= -ctx.dt;
+                    s.dq += dir[i] * q[i];
+                    s.fd += free(i) * dir[i];
+                    if (dir[i] > 0) s.feasible = std::min(s.feasible, pressure[i] / dir[i]);
+                }
+                return s;
+            },
+            Sums{},
+            [](const Sums& a, const Sums& b) { return Sums{a.dq + b.dq, a.fd + b.fd, std::min(a.feasible, b.feasible)}; });
+        if (!(sums.dq > 0)) break;  // nothing left to move
+        const Real step = sums.fd / sums.dq;
+        if (step <= sums.feasible) {
+            // z = D^-1 free after the move, and beta = z . q / d . q for the next conjugate direction.
+            const Real zq = deterministicSum(n, [&](std::size_t i) {
+                moveOne(i, step, dir);
+                z[i] = inverseD(i) * free(i);
+                return z[i] * q[i];
+            });
+            const Real beta = zq / sums.dq;
+            measured = updateAndMeasure([&](std::size_t i) { dir[i] = z[i] - beta * dir[i]; });
         } else {
             // Expansion: up to the bound, then a projected gradient step; conjugate directions start again.
-            move(feasible, dir);
             forEachParticle(n, [&](std::size_t i) {
+                moveOne(i, sums.feasible, dir);
                 z[i] = pressure[i] - std::max<Real>(pressure[i] - kRelaxation * inverseD(i) * free(i), 0);
             }, 4096);
             multiply(z);
-            move(1, z);
+            measured = updateAndMeasure([&](std::size_t i) {
+                q[i] *= -ctx.dt;
+                moveOne(i, 1, z);
+            });
             restart = true;
         }
     }
