@@ -27,10 +27,10 @@ struct ViscosityParams : EffectParams {
     /// CG stops when |r| <= tolerance |b - (I - dt A) v|, the residual relative to the correction the solve has to
     /// make. The rigid motions are solved exactly after CG, so the tolerance does not decide what happens to momentum
     /// or spin. Where the fluid is soft it mostly decides how much extra the constant-density solve does after
-    /// viscosity: at 1e-2 a viscous column at rest stays within the DFSPH tolerance (5.2 mm/s, mean compression
-    /// 6.5e-5; at 1e-3 2.7 mm/s and 2.7e-6), and the anchors' spread errors against a converged reference are
-    /// 0.09 / 1.0 / 0.2 % (at 1e-3 0.09 / 1.4 / 0.08 %; SPlisHSPlasH's 0.9 / 10 / 0.9 %) with half the CG iterations
-    /// (docs/benchmarks.md).
+    /// viscosity: at 1e-2 a viscous column at rest stays within the DFSPH tolerance (mean compression 6.5e-5, at 1e-3
+    /// 2.7e-6; test PressureDFSPH.ViscousColumnRestsToTheSolverTolerance), and the anchors' spread errors against a
+    /// converged reference are 0.09 / 1.0 / 0.2 % (at 1e-3 0.09 / 1.4 / 0.08 %; SPlisHSPlasH's 0.9 / 10 / 0.9 %)
+    /// with half the CG iterations (docs/benchmarks.md).
     Real tolerance = 1e-2;
     /// The tolerance of solves with stiff particles (stiffness dt mu / (rho h^2) from 3,000, where the clusters
     /// join the preconditioner), when it is the smaller: there it decides how stiff the fluid stays. A 5e6 Pa s body
