@@ -14,5 +14,8 @@ inline constexpr Attribute<Real> kTemperature{"temperature"};
 inline constexpr Attribute<Real> kViscosity{"viscosity"};
 /// Rest density rho_0 [kg/m^3], from the mass and the sampling lattice.
 inline constexpr Attribute<Real> kRestDensity{"_rest_density", false};
+/// 1 where the last implicit viscosity solve found the particle stiff enough to move with its neighbours as one
+/// body, else 0; present only with the weiler2018 viscosity. The pressure warm start reads it (PressureDFSPH).
+inline constexpr Attribute<Real> kViscouslyRigid{"_viscously_rigid", false};
 
 }  // namespace ganache::attribute

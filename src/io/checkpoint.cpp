@@ -17,8 +17,9 @@ namespace ganache {
 namespace {
 
 constexpr char kMagic[8] = {'G', 'N', 'C', 'H', 'C', 'K', 'P', 'T'};
-// 2: effects save their own state; 3: the viscosity warm start's steps; 4: steps past the CFL limit
-constexpr std::uint32_t kVersion = 4;
+// 2: effects save their own state; 3: the viscosity warm start's steps; 4: steps past the CFL limit; 5: which
+// particles the viscosity moves as one body (attribute::kViscouslyRigid)
+constexpr std::uint32_t kVersion = 5;
 
 // Writing and reading share one description of the state (fields() below): the same calls on a ByteWriter append
 // each value, on a ByteReader take it back, so the two can never disagree on the order.

@@ -4,6 +4,7 @@
 #include "core/byte_stream.h"
 #include "core/parallel.h"
 #include "core/timing.h"
+#include "physics/gravity.h"
 #include "physics/pressure/pressure_dfsph.h"
 
 #include <fmt/format.h>
@@ -47,6 +48,8 @@ Simulation::Simulation(const SimulationSetup& setup, ParticleSet fluid, const st
     m_peakForce.assign(bodies.size(), 0);
     moveBoundaries(0);
 
+    if (const EffectSpec* gravity = setup.findEffect("gravity"))
+        m_gravity = static_cast<const GravityParams&>(*gravity->params).acceleration.norm();
     m_pressure = std::make_unique<PressureDFSPH>(m_pressureSettings, m_fluid);
     for (const EffectSpec& spec : setup.effects) {
         const EffectEntry* entry = findEffectEntry(spec.name);
@@ -303,7 +306,7 @@ void Simulation::step(Real maxDt) {
         // honey block landing at 1 m/s at 5-20 m/s, one through the tank's floor (5 ms steps at r = 2.5 mm, 2.5x
         // the limit). There the warm start shrinks with the excess. Within the limit it stays whole: halved always,
         // as SPlisHSPlasH does, it cost the anchors 15-30 % more pressure iterations a step.
-        m_pressure->applyWarmStart(ctx, m_fluid, dt > limit ? limit / dt : 1);
+        m_pressure->applyWarmStart(ctx, m_fluid, dt > limit ? limit / dt : 1, m_gravity * dt);
     }
     // Predicted: viscosity acts on the velocity that already carries this step's forces and the pressure that held
     // them last step, so the constant-density solve after it only adds what changed. With the paper's order the

@@ -170,6 +170,7 @@ private:
     TimeStepSettings m_timeStep;
     PressureSettings m_pressureSettings;
     ViscosityOrder m_order;
+    Real m_gravity = 0;  // |g| of the gravity effect [m/s^2]; 0 without it
 
     ParticleSet m_fluid;
     BoundaryParticles m_boundary;

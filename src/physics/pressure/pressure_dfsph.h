@@ -18,8 +18,10 @@ public:
     /// positions [BK17 Eq. 11].
     void computeFactors(const StepContext& ctx, const ParticleSet& particles);
     /// Applies the previous step's constant-density pressure, times `scale`, to the velocities: the warm start of
-    /// this step's constant-density solve.
-    void applyWarmStart(StepContext& ctx, ParticleSet& particles, Real scale);
+    /// this step's constant-density solve. Its net push on the particles the viscosity moves as one body
+    /// (attribute::kViscouslyRigid) is at most their weight over the step: their mass times `support` [m/s], the
+    /// velocity change gravity gives in the step.
+    void applyWarmStart(StepContext& ctx, ParticleSet& particles, Real scale, Real support);
     /// Constant-density solve on the predicted velocities, before advection, from the pressures applied so far
     /// (the warm start, and earlier passes of the step).
     void solveDensity(StepContext& ctx, ParticleSet& particles);

@@ -1,5 +1,6 @@
 #include "physics/viscosity/viscosity_weiler2018.h"
 
+#include "core/attributes.h"
 #include "core/parallel.h"
 #include "physics/pair_sweeps.h"
 
@@ -49,6 +50,10 @@ std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vect
     return lap;
 }
 
+ViscosityWeiler2018::ViscosityWeiler2018(const ViscosityParams& params, const SimulationSetup& setup,
+                                         ParticleSet& particles)
+    : ViscosityMethod(params, setup, particles), m_rigidFlag(&particles.add(attribute::kViscouslyRigid)) {}
+
 Real ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                                    std::vector<Vec3>& out) const {
     // (I - dt A) in, with the bodies' velocities on the right-hand side
@@ -93,8 +98,11 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     using P = ViscosityParams::Preconditioner;
     // dt A against the identity, about dt mu / (rho h^2): stiff particles join clusters and tighten the tolerance.
     const auto stiffness = [&](std::size_t i) { return -dt * fluidBlock(i).trace() / 3; };
-    bool stiff = false;
-    for (std::size_t i = 0; i < n && !stiff; ++i) stiff = stiffness(i) >= kStiff;
+    auto& rigidFlag = *m_rigidFlag;
+    const bool stiff = deterministicSum<std::size_t>(n, [&](std::size_t i) {
+        rigidFlag[i] = stiffness(i) >= kStiff;
+        return std::size_t(rigidFlag[i]);
+    }) > 0;
     const Real tolerance = stiff ? std::min(m_params.tolerance, m_params.stiffTolerance) : m_params.tolerance;
     bool clusters = false;
     if (m_params.preconditioner == P::Clusters && stiff) {

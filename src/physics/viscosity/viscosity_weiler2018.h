@@ -17,8 +17,7 @@ std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vect
 /// symmetric positive definite.
 class ViscosityWeiler2018 final : public ViscosityMethod {
 public:
-    ViscosityWeiler2018(const ViscosityParams& params, const SimulationSetup& setup, ParticleSet& particles)
-        : ViscosityMethod(params, setup, particles) {}
+    ViscosityWeiler2018(const ViscosityParams& params, const SimulationSetup& setup, ParticleSet& particles);
 
 protected:
     ViscosityPass solve(StepContext& ctx, const ParticleSet& particles, std::vector<Vec3>& out) override;
@@ -28,6 +27,7 @@ private:
     Real multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out) const;
 
+    std::vector<Real>* m_rigidFlag;  // attribute::kViscouslyRigid
     std::vector<Vec3> m_b;
     ConjugateGradient m_cg;
     std::vector<Mat3> m_inverseDiagonal;
