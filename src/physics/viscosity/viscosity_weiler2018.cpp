@@ -111,7 +111,7 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
         // left CG at its cap.
         m_group.resize(n);
         forEachParticle(n, [&](std::size_t i) {
-            m_group[i] = stiffness(i) < kStiff ? ClusterModes::kNoCluster
+            m_group[i] = rigidFlag[i] == 0 ? ClusterModes::kNoCluster
                          : m_mu.varies()
                              ? std::uint8_t(std::min(std::floor(std::log10(std::max(m_mu(i), Real(1)))), 254.0))
                              : std::uint8_t(0);
