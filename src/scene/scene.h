@@ -120,7 +120,7 @@ struct SurfaceSettings {
     std::int64_t smoothing = 2;      ///< mean-curvature smoothing iterations of the level set
     bool mesh = true;                ///< write mesh/<scene>.####.obj (or .ply)
     bool meshPly = false;            ///< binary PLY meshes instead of OBJ text
-    Real adaptivity = 0.1;           ///< VolumeToMesh adaptivity in [0, 1] (0 keeps every polygon); see defaultAdaptivity
+    Real adaptivity = 0.1;           ///< VolumeToMesh adaptivity in [0, 1] (0: every polygon); defaultAdaptivity
     bool densityGrid = false;        ///< extra grid `density` (fog volume, 0 outside to 1 deep inside)
     bool temperatureGrid = false;    ///< extra grid `temperature` [C]
     bool velocityGrid = false;       ///< extra grid `vel` [m/s]

@@ -127,7 +127,7 @@ TEST(Stability, NearlyRigidBlockLandsWithoutBouncing) {
     // It bounced off the floor at 0.40 m/s (0.68 at k = 2) after landing at 0.93, when the pressure warm start
     // reapplied the landing's push and the viscosity solve spread it over the whole block. Sampled every 5 ms, its
     // mean vertical velocity never points up by more than 5 cm/s (measured: never up at k = 1, 3.0 cm/s for one
-    // sample at k = 2; at rest within 1 mm/s 80 ms after landing at both).
+    // sample at k = 2, at rest within 1 mm/s 80 ms after landing at both; 9 cm/s at k = 3, open: docs/paper.md).
     World world = blockInTank(1.0e6);
     Simulation sim = world.simulation();
     Real up = -1;

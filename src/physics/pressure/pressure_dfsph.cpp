@@ -270,7 +270,9 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
                 return s;
             },
             Sums{},
-            [](const Sums& a, const Sums& b) { return Sums{a.dq + b.dq, a.fd + b.fd, std::min(a.feasible, b.feasible)}; });
+            [](const Sums& a, const Sums& b) {
+                return Sums{a.dq + b.dq, a.fd + b.fd, std::min(a.feasible, b.feasible)};
+            });
         if (!(sums.dq > 0)) break;  // nothing left to move
         const Real step = sums.fd / sums.dq;
         if (step <= sums.feasible) {
