@@ -21,6 +21,7 @@
 #include <openvdb/tree/LeafManager.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace ganache::surfacing {
@@ -28,7 +29,6 @@ namespace ganache::surfacing {
 namespace {
 
 using openvdb::FloatGrid;
-using FloatLeaf = openvdb::FloatTree::LeafNodeType;
 
 constexpr Real kKernelSupport = 4;  // support in particle radii (two lattice spacings)
 // Largest to smallest axis of a kernel (Yu & Turk's k_r is 4). Squashed surface kernels pull the surface of a
@@ -47,42 +47,68 @@ struct Ellipsoid {
     Vec3 extent;   // half size of its bounding box [m]
 };
 
+// Each particle's kernel from the spread of its neighbours within the support. The sums the spread needs are
+// taken in one pass over the 27 grid cells around the particle's own, without storing neighbour lists (which cost
+// as much again as the sums at 1M particles).
 std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
-    const Real support = kKernelSupport * r;
+    const Real support = kKernelSupport * r, support2 = support * support, inverseCube = 1 / (support2 * support);
     UniformGrid grid(support);
-    NeighbourList neighbours;
-    findFluidNeighbours(grid, x, support, neighbours);
+    grid.build(x);
+    const std::vector<Real>& sx = grid.sortedCoords(0);
+    const std::vector<Real>& sy = grid.sortedCoords(1);
+    const std::vector<Real>& sz = grid.sortedCoords(2);
     std::vector<Ellipsoid> out(x.size());
-    forEachParticle(x.size(), [&](std::size_t i) {
-        // Weighted mean and covariance of the neighbourhood, itself included, w = 1 - (d / support)^3.
-        auto weight = [&](std::uint32_t j) {
-            const Real q = (x[j] - x[i]).norm() / support;
-            return 1 - q * q * q;
-        };
-        Real total = 1;
-        Vec3 mean = x[i];
-        for (std::uint32_t j : neighbours.of(i)) {
-            const Real w = weight(j);
-            total += w;
-            mean += w * x[j];
+    forEachBlock(grid.cellCount(), [&](std::size_t begin, std::size_t end) {
+        for (std::size_t c = begin; c != end; ++c) {
+            std::array<std::pair<std::size_t, std::size_t>, 27> around;
+            std::size_t cells = 0;
+            const auto& k = grid.cellCoords(c);
+            for (int a = -1; a <= 1; ++a)
+                for (int b = -1; b <= 1; ++b)
+                    for (int d = -1; d <= 1; ++d) {
+                        const std::int64_t found = grid.findCell(k[0] + a, k[1] + b, k[2] + d);
+                        if (found >= 0)
+                            around[cells++] = {grid.cellBegin(std::size_t(found)), grid.cellBegin(std::size_t(found) + 1)};
+                    }
+            for (std::size_t s = grid.cellBegin(c); s != grid.cellBegin(c + 1); ++s) {
+                // Weighted sums over the neighbourhood, itself included, w = 1 - (d / support)^3, of the offsets
+                // from the particle and of their products (the covariance about the weighted mean follows).
+                Real total = 1, m[3] = {0, 0, 0}, q[6] = {0, 0, 0, 0, 0, 0};
+                std::size_t count = 0;
+                for (std::size_t n = 0; n != cells; ++n)
+                    for (std::size_t t = around[n].first; t != around[n].second; ++t) {
+                        const Real dx = sx[t] - sx[s], dy = sy[t] - sy[s], dz = sz[t] - sz[s];
+                        const Real d2 = dx * dx + dy * dy + dz * dz;
+                        if (d2 >= support2 || t == s) continue;
+                        const Real w = 1 - d2 * std::sqrt(d2) * inverseCube;
+                        ++count;
+                        total += w;
+                        m[0] += w * dx, m[1] += w * dy, m[2] += w * dz;
+                        q[0] += w * dx * dx, q[1] += w * dy * dy, q[2] += w * dz * dz;
+                        q[3] += w * dx * dy, q[4] += w * dx * dz, q[5] += w * dy * dz;
+                    }
+                const std::uint32_t i = grid.sortedIndices()[s];
+                Ellipsoid& e = out[i];
+                e.centre = x[i];
+                e.shape = Mat3::Identity();
+                if (count >= kMinNeighbours) {
+                    const Vec3 mean = Vec3(m[0], m[1], m[2]) / total;
+                    Mat3 covariance;
+                    covariance << q[0], q[3], q[4], q[3], q[1], q[5], q[4], q[5], q[2];
+                    covariance = covariance / total - mean * mean.transpose();
+                    Eigen::SelfAdjointEigenSolver<Mat3> eigen;
+                    eigen.computeDirect(covariance);
+                    Vec3 scale = eigen.eigenvalues().cwiseMax(eigen.eigenvalues().maxCoeff() / kMaxStretch);
+                    scale /= std::cbrt(scale.prod());  // keep the kernel's volume: the interior's sum does not change
+                    e.shape = eigen.eigenvectors() * scale.cwiseInverse().asDiagonal() * eigen.eigenvectors().transpose();
+                }
+                // The ellipsoid {y : |A y| < support} = A^-1 (ball); its box's half size along axis k is
+                // support |row_k A^-1|.
+                const Mat3 inverse = e.shape.inverse();
+                for (int axis = 0; axis < 3; ++axis) e.extent[axis] = support * inverse.row(axis).norm();
+            }
         }
-        mean /= total;
-        Ellipsoid& e = out[i];
-        e.centre = x[i];
-        e.shape = Mat3::Identity();
-        if (neighbours.of(i).size() >= kMinNeighbours) {
-            Mat3 c = (x[i] - mean) * (x[i] - mean).transpose();
-            for (std::uint32_t j : neighbours.of(i)) c += weight(j) * (x[j] - mean) * (x[j] - mean).transpose();
-            Eigen::SelfAdjointEigenSolver<Mat3> eigen;
-            eigen.computeDirect(c / total);
-            Vec3 s = eigen.eigenvalues().cwiseMax(eigen.eigenvalues().maxCoeff() / kMaxStretch);
-            s /= std::cbrt(s.prod());  // keep the kernel's volume: the field's interior value does not change
-            e.shape = eigen.eigenvectors() * s.cwiseInverse().asDiagonal() * eigen.eigenvectors().transpose();
-        }
-        // The ellipsoid {y : |A y| < support} = A^-1 (ball); its box's half size along axis k is support |row_k A^-1|.
-        const Mat3 inverse = e.shape.inverse();
-        for (int k = 0; k < 3; ++k) e.extent[k] = support * inverse.row(k).norm();
-    }, 256);
+    }, 16);
     return out;
 }
 
@@ -223,31 +249,65 @@ std::vector<LatticeLeaf> leavesReached(const KernelBins& binned) {
 }
 
 // The bricks (cells of the coarse lattice, named by their lowest corner) the surface may cross: a corner's kernel
-// sum between kSeedLow and kSeedHigh of the interior's, or corners on both sides of them.
+// sum between kSeedLow and kSeedHigh of the interior's, or corners on both sides of them. Each coarse leaf is read
+// from its buffer with a layer of its neighbours' points on every side (no accessor per corner), and decides the
+// bricks whose lowest corner it holds, and those one point below it whose own leaf the coarse grid lacks.
 openvdb::MaskGrid::Ptr bricksCrossed(const FloatGrid& coarse, Real interior) {
     const float low = float(kSeedLow * interior), high = float(kSeedHigh * interior);
     const float iso = coarse.background();
-    openvdb::MaskGrid::Ptr mask = openvdb::MaskGrid::create();
-    mask->tree().topologyUnion(coarse.tree());
-    // A brick whose lowest corner lies outside the coarse grid's leaves may still be crossed.
-    openvdb::tools::dilateActiveValues(mask->tree(), 1, openvdb::tools::NN_FACE_EDGE_VERTEX,
-                                       openvdb::tools::IGNORE_TILES);
-    openvdb::tree::LeafManager<openvdb::MaskTree> leaves(mask->tree());
-    leaves.foreach([&](openvdb::MaskTree::LeafNodeType& leaf, std::size_t) {
-        const auto acc = coarse.getConstAccessor();
-        for (auto it = leaf.beginValueOn(); it; ++it) {
-            const openvdb::Coord m = it.getCoord();
-            bool inside = false, outside = false, between = false;
-            for (int corner = 0; corner < 8; ++corner) {
-                const float f = iso - acc.getValue(m.offsetBy(corner >> 2, (corner >> 1) & 1, corner & 1));
-                inside = inside || f >= high;
-                outside = outside || f <= low;
-                between = between || (f > low && f < high);
-            }
-            if (!between && !(inside && outside)) leaf.setValueOff(it.pos());
+    using MaskLeaf = openvdb::MaskTree::LeafNodeType;
+    std::vector<const FloatLeaf*> leaves;
+    leaves.reserve(coarse.tree().leafCount());
+    coarse.tree().getNodes(leaves);
+    std::vector<MaskLeaf*> own(leaves.size(), nullptr);
+    std::vector<std::vector<openvdb::Coord>> below(leaves.size());
+    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
+        // Per point of the leaf and the layer around it (index +1): 1 outside (sum at most low), 2 between,
+        // 4 inside (at least high).
+        LeafNeighbourhood values;
+        std::uint8_t kind[10][10][10];
+        for (std::size_t l = begin; l != end; ++l) {
+            const openvdb::Coord o = leaves[l]->origin();
+            values.gather(coarse.tree(), *leaves[l]);
+            unsigned seen = 0;
+            for (int i = -1; i <= 8; ++i)
+                for (int j = -1; j <= 8; ++j)
+                    for (int k = -1; k <= 8; ++k) {
+                        const float sum = iso - values(i, j, k);
+                        const std::uint8_t bits = sum <= low ? 1 : sum >= high ? 4 : 2;
+                        kind[i + 1][j + 1][k + 1] = bits;
+                        seen |= bits;
+                    }
+            if (seen == 1 || seen == 4) continue;  // all outside or all inside
+            bool leafBelow[2][2][2];  // whether the grid has the leaf 8 points lower along the axes marked 0
+            for (int a = 0; a < 2; ++a)
+                for (int b = 0; b < 2; ++b)
+                    for (int c = 0; c < 2; ++c)
+                        leafBelow[a][b][c] = coarse.tree().probeConstLeaf(o.offsetBy(8 * (a - 1), 8 * (b - 1), 8 * (c - 1)));
+            for (int i = -1; i < 8; ++i)
+                for (int j = -1; j < 8; ++j)
+                    for (int k = -1; k < 8; ++k) {
+                        const bool ownBrick = i >= 0 && j >= 0 && k >= 0;
+                        if (!ownBrick && leafBelow[i >= 0][j >= 0][k >= 0]) continue;  // its own leaf decides
+                        unsigned bits = 0;
+                        for (int corner = 0; corner < 8; ++corner)
+                            bits |= kind[i + 1 + (corner >> 2)][j + 1 + ((corner >> 1) & 1)][k + 1 + (corner & 1)];
+                        if (!(bits & 2u) && (bits & 5u) != 5u) continue;
+                        if (!ownBrick) {
+                            below[l].push_back(o.offsetBy(i, j, k));
+                            continue;
+                        }
+                        if (!own[l]) own[l] = new MaskLeaf(o, false);
+                        own[l]->setValueOn(openvdb::Index(i * 64 + j * 8 + k));
+                    }
         }
-    });
-    openvdb::tools::pruneInactive(mask->tree());
+    }, 8);
+    openvdb::MaskGrid::Ptr mask = openvdb::MaskGrid::create();
+    for (MaskLeaf* leaf : own)
+        if (leaf) mask->tree().addLeaf(leaf);
+    auto acc = mask->getAccessor();
+    for (const auto& coords : below)
+        for (const openvdb::Coord& m : coords) acc.setValueOn(m);
     return mask;
 }
 
@@ -276,42 +336,35 @@ std::vector<LatticeLeaf> fineLeaves(const openvdb::MaskGrid& bricks) {
 void fieldToDistance(FloatGrid& field, Real voxel, Real halfBand) {
     const float band = float(halfBand * voxel), inv2h = float(0.5 / voxel);
     openvdb::tree::LeafManager<openvdb::FloatTree> leaves(field.tree(), 1);
-    leaves.foreach([&](FloatLeaf& leaf, std::size_t index) {
-        const auto acc = field.getConstAccessor();
-        float* out = leaves.getBuffer(index, 1).data();
-        const float* in = leaf.buffer().data();
-        for (int n = 0; n < 512; ++n) out[n] = in[n] < 0 ? -band : band;
-        const auto& active = leaf.getValueMask();
-        for (auto it = leaf.beginValueOn(); it; ++it) {
-            const openvdb::Index n = it.pos();
-            const int ijk[3] = {int(n >> 6), int((n >> 3) & 7), int(n & 7)};
-            const float g = in[n];
-            float gradient2 = 0;
-            for (int axis = 0; axis < 3; ++axis) {
-                // A neighbour inside the leaf is read from its buffer, one outside through the accessor.
-                const int stride = 1 << (3 * (2 - axis));
-                auto neighbour = [&](int side, float& value) {
-                    if (ijk[axis] + side >= 0 && ijk[axis] + side < 8) {
-                        const openvdb::Index m = openvdb::Index(int(n) + side * stride);
-                        value = in[m];
-                        return active.isOn(m);
-                    }
-                    openvdb::Coord c = it.getCoord();
-                    c[axis] += side;
-                    return acc.probeValue(c, value);
+    forEachBlock(leaves.leafCount(), [&](std::size_t begin, std::size_t end) {
+        LeafNeighbourhood g;  // inactive points read NaN: no value there
+        for (std::size_t l = begin; l != end; ++l) {
+            const FloatLeaf& leaf = leaves.leaf(l);
+            g.gather(field.tree(), leaf, true);
+            float* out = leaves.getBuffer(l, 1).data();
+            const float* in = leaf.buffer().data();
+            for (int n = 0; n < 512; ++n) out[n] = in[n] < 0 ? -band : band;
+            for (auto it = leaf.cbeginValueOn(); it; ++it) {
+                const openvdb::Index n = it.pos();
+                const int i = int(n >> 6), j = int((n >> 3) & 7), k = int(n & 7);
+                const float here = in[n];
+                // Central differences where both neighbours have values, one-sided where one has.
+                auto derivative = [&](float up, float down) {
+                    const bool hasUp = !std::isnan(up), hasDown = !std::isnan(down);
+                    return hasUp && hasDown ? (up - down) * inv2h
+                         : hasUp           ? (up - here) * 2 * inv2h
+                         : hasDown         ? (here - down) * 2 * inv2h
+                                           : 0.f;
                 };
-                float gu, gd;
-                const bool hasUp = neighbour(1, gu), hasDown = neighbour(-1, gd);
-                const float d = hasUp && hasDown ? (gu - gd) * inv2h
-                              : hasUp           ? (gu - g) * 2 * inv2h
-                              : hasDown         ? (g - gd) * 2 * inv2h
-                                                : 0.f;
-                gradient2 += d * d;
+                const float dx = derivative(g(i + 1, j, k), g(i - 1, j, k));
+                const float dy = derivative(g(i, j + 1, k), g(i, j - 1, k));
+                const float dz = derivative(g(i, j, k + 1), g(i, j, k - 1));
+                const float gradient2 = dx * dx + dy * dy + dz * dz;
+                const float distance = gradient2 > 0 ? here / std::sqrt(gradient2) : (here < 0 ? -band : band);
+                out[n] = std::clamp(distance, -band, band);
             }
-            const float distance = gradient2 > 0 ? g / std::sqrt(gradient2) : (g < 0 ? -band : band);
-            out[it.pos()] = std::clamp(distance, -band, band);
         }
-    });
+    }, 16);
     leaves.swapLeafBuffer(1);
     leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
         for (auto it = leaf.beginValueOn(); it; ++it)

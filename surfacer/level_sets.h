@@ -5,12 +5,30 @@
 
 #include <openvdb/openvdb.h>
 
+#include <cstdint>
 #include <vector>
 
 namespace ganache::surfacing {
 
+using FloatLeaf = openvdb::FloatTree::LeafNodeType;
+
+/// A leaf's values and one layer of its neighbours' around it, read once so that stencils need no tree lookups.
+class LeafNeighbourhood {
+public:
+    /// Points outside the tree's leaves take its tiles' values; with inactiveAsNaN, every inactive point reads NaN.
+    void gather(const openvdb::FloatTree& tree, const FloatLeaf& leaf, bool inactiveAsNaN = false);
+    /// The value at (i, j, k) of the leaf, each in -1..8.
+    float operator()(int i, int j, int k) const { return m_values[i + 1][j + 1][k + 1]; }
+
+private:
+    float m_values[10][10][10];
+};
+
 /// Yu & Turk's anisotropic kernels (see surfacer.h): the narrow-band level set of half-width halfBand voxels
 /// where the particles' kernel sum falls to half its value inside a lattice of spacing 2r.
 openvdb::FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxel, Real halfBand);
+
+/// `passes` steps of mean-curvature flow, each followed by one renormalisation (smoothing.cpp).
+void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes);
 
 }  // namespace ganache::surfacing
