@@ -98,6 +98,10 @@ FloatGrid::Ptr spheres(const std::vector<Vec3>& x, Real r, Real voxel) {
     raster.finalize(true);
     trimToBand(*grid);
     openvdb::tools::LevelSetFilter<FloatGrid> filter(*grid);
+    // The offset moves the surface half a voxel at a time, renormalising the band after each move: two
+    // renormalisations a move instead of the tracker's three take a 200k-particle frame from 19.7 to 14.2 s with
+    // every quality test still passing (one leaves bubbles in the jittered ball; docs/benchmarks.md).
+    filter.setNormCount(2);
     filter.offset(float(kSphereInset * r));  // a positive offset moves the surface inward
     return grid;
 }

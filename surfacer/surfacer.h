@@ -13,7 +13,8 @@
 //    of beading; the surface is where the kernel sum falls to half its value inside a lattice of spacing 2 r. The
 //    sum is taken only near the surface (found on a lattice of twice the voxel), and the signed distance comes
 //    from it directly (anisotropic.cpp).
-// Then mean-curvature smoothing (OpenVDB LevelSetFilter), and meshing (OpenVDB VolumeToMesh).
+// Then mean-curvature smoothing (smoothing.cpp: OpenVDB LevelSetFilter's flow on the leaves' buffers), and meshing
+// (OpenVDB VolumeToMesh).
 
 #include "core/particles.h"
 #include "scene/scene.h"
