@@ -28,6 +28,11 @@ private:
 /// where the particles' kernel sum falls to half its value inside a lattice of spacing 2r.
 openvdb::FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxel, Real halfBand);
 
+/// Zhu & Bridson's smooth spheres: the narrow-band level set of half-width halfBand voxels of the distance from each
+/// point to the weighted mean of the particles within `search` [m], less `radius` [m].
+openvdb::FloatGrid::Ptr smoothSpheresLevelSet(const std::vector<Vec3>& x, Real radius, Real search, Real voxel,
+                                              Real halfBand);
+
 /// `passes` steps of mean-curvature flow, each followed by one renormalisation (smoothing.cpp).
 void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes);
 

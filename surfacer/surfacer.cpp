@@ -9,14 +9,11 @@
 #include "io/vdb_file.h"
 
 #include <openvdb/openvdb.h>
-#include <openvdb/points/PointConversion.h>
-#include <openvdb/points/PointRasterizeSDF.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetFilter.h>
 #include <openvdb/tools/LevelSetUtil.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
 #include <openvdb/tools/Morphology.h>
-#include <openvdb/tools/PointIndexGrid.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tools/VolumeToMesh.h>
@@ -46,8 +43,6 @@ void initialiseOpenVdb() {
     static std::once_flag once;
     std::call_once(once, [] { openvdb::initialize(); });
 }
-
-openvdb::math::Transform::Ptr voxelTransform(Real voxel) { return openvdb::math::Transform::createLinearTransform(voxel); }
 
 // --- the narrow band ----------------------------------------------------------------------------------------
 
@@ -103,23 +98,6 @@ FloatGrid::Ptr spheres(const std::vector<Vec3>& x, Real r, Real voxel) {
     // every quality test still passing (one leaves bubbles in the jittered ball; docs/benchmarks.md).
     filter.setNormCount(2);
     filter.offset(float(kSphereInset * r));  // a positive offset moves the surface inward
-    return grid;
-}
-
-// --- smooth spheres (Zhu & Bridson) ------------------------------------------------------------------------
-
-FloatGrid::Ptr smoothSpheres(const std::vector<Vec3>& x, Real r, Real voxel) {
-    std::vector<openvdb::Vec3R> positions(x.size());
-    for (std::size_t i = 0; i < x.size(); ++i) positions[i] = openvdb::Vec3R(x[i].x(), x[i].y(), x[i].z());
-    const openvdb::points::PointAttributeVector<openvdb::Vec3R> wrapper(positions);
-    // Points are bucketed at about one per voxel of the lattice spacing.
-    const auto pointTransform = voxelTransform(2 * r);
-    const auto index = openvdb::tools::createPointIndexGrid<openvdb::tools::PointIndexGrid>(wrapper, *pointTransform);
-    const auto points = openvdb::points::createPointDataGrid<openvdb::points::NullCodec, openvdb::points::PointDataGrid>(
-        *index, wrapper, *pointTransform);
-    FloatGrid::Ptr grid = openvdb::points::rasterizeSmoothSpheres(*points, kSmoothRadius * r, kSmoothSearch * r,
-                                                                  kHalfBand, voxelTransform(voxel));
-    trimToBand(*grid);
     return grid;
 }
 
@@ -240,7 +218,10 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSet
             const ScopedTimer timer(timings.levelSet);
             switch (settings.method) {
             case SurfaceMethod::Spheres: surface = spheres(x, r, voxel); break;
-            case SurfaceMethod::SmoothSpheres: surface = smoothSpheres(x, r, voxel); break;
+            case SurfaceMethod::SmoothSpheres:
+                surface = surfacing::smoothSpheresLevelSet(x, kSmoothRadius * r, kSmoothSearch * r, voxel, kHalfBand);
+                trimToBand(*surface);
+                break;
             case SurfaceMethod::Anisotropic: surface = surfacing::anisotropicLevelSet(x, r, voxel, kHalfBand); break;
             }
         }

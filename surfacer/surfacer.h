@@ -6,13 +6,13 @@
 //  - spheres: a sphere of 2.5 r around every particle (OpenVDB ParticlesToLevelSet), large enough to leave no
 //    bubble between disordered particles, then moved inward by 1.36 r so that a flat layer's surface sits about
 //    r above its top particles (where the lattice cells end);
-//  - smooth_spheres: Zhu & Bridson 2005 (OpenVDB's point rasterisation): distance to the weighted average of the
-//    neighbours, which fills the dips between spheres;
+//  - smooth_spheres: Zhu & Bridson 2005: distance to the weighted average of the neighbours within 2.7 r, less
+//    0.9 r, which fills the dips between spheres; evaluated only near the surface, like the anisotropic kernels;
 //  - anisotropic: Yu & Turk 2013: each particle's kernel (support 4 r) stretched along its neighbours' spread
 //    (a principal component analysis, at most 2:1, volume kept), so thin sheets and threads stay smooth instead
 //    of beading; the surface is where the kernel sum falls to half its value inside a lattice of spacing 2 r. The
 //    sum is taken only near the surface (found on a lattice of twice the voxel), and the signed distance comes
-//    from it directly (anisotropic.cpp).
+//    from it directly (kernel_level_sets.cpp).
 // Then mean-curvature smoothing (smoothing.cpp: OpenVDB LevelSetFilter's flow on the leaves' buffers), and meshing
 // (OpenVDB VolumeToMesh).
 

@@ -1,11 +1,12 @@
-// Anisotropic kernels (Yu & Turk 2013) summed only where the surface can be.
+// Level sets from sums over particles' kernels, taken only where the surface can be: Yu & Turk's anisotropic
+// kernels (2013) and Zhu & Bridson's smooth spheres (2005).
 //
-// The kernel sum over every voxel a kernel reaches (about 2,000 per particle) was most of a frame's time, and the
-// level set rebuilt from it (mesh to volume) most of the rest. Here the sum is taken in two passes: first on a
-// coarse lattice of two voxels' spacing, which finds the bricks of 2^3 voxels the surface can cross; then on the
-// voxels of those bricks and of the bricks around them, as wide as the narrow band. The signed distance is the
-// kernel sum's distance from the iso value over its gradient, exact to first order at the surface, so that no
-// rebuild is needed.
+// Summing over every voxel a kernel reaches (about 2,000 per particle) was most of a frame's time. Here a field is
+// taken in two passes: first on a coarse lattice of two voxels' spacing, which finds the bricks of 2^3 voxels the
+// surface can cross; then on the voxels of those bricks and of the bricks around them, as wide as the narrow band.
+// For anisotropic kernels the signed distance is the kernel sum's distance from the iso value over its gradient,
+// exact to first order at the surface, so that no level set needs rebuilding from a mesh; Zhu & Bridson's field is a
+// distance near the surface already.
 
 #include "surfacer/level_sets.h"
 
@@ -149,27 +150,26 @@ inline unsigned rowBricks(std::uint64_t bricks, int a, int b) {
     return unsigned(bricks >> ((a >> 1) * 16 + (b >> 1) * 4)) & 0xFu;
 }
 
-// The kernel sum on a lattice of spacing h [m] (point ijk at h ijk), at the points of the chosen bricks of each
-// target leaf, stored as iso minus the sum (negative inside) on active voxels; background iso. Each leaf gathers
-// the kernels whose boxes reach it from a grid of their centres, in that grid's fixed order: deterministic for
-// any thread count. Along a row of z the ellipsoid is an interval, found from a quadratic, so only points inside
-// a kernel are visited.
-FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
-                         const std::vector<LatticeLeaf>& targets, Real r, Real iso) {
-    const CubicSpline w(kKernelSupport * r);
-    const Real support = w.supportRadius();
-    const float scale = float(8 * r * r * r * w.W0());  // each particle weighs one lattice cell (2r)^3
+// Visits, for each target leaf of a lattice of spacing h [m] (point ijk at h ijk), every row along z of its chosen
+// bricks that a kernel reaches: field.add(kernel, a, b, px, py, pz) with the row's points in the kernel's own
+// coordinates (A y / support; inside where |p| < 1), after field.start(leaf origin); field.finish(leaf) then writes
+// the leaf's values. Each leaf gathers the kernels whose boxes reach it from a grid of their centres, in that grid's
+// fixed order: deterministic for any thread count. Along a row the ellipsoid is an interval, found from a
+// quadratic, so rows that miss it are skipped. Returns the grid of the leaves made (background `background`).
+template <class Field>
+FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
+                          const std::vector<LatticeLeaf>& targets, Real support, float background, const Field& prototype) {
     const Real h = binned.h, cell = 8 * h;
     const Vec3& reach = binned.reach;
     const UniformGrid& bins = binned.grid;
     std::vector<FloatLeaf*> made(targets.size(), nullptr);
     forEachBlock(targets.size(), [&](std::size_t begin, std::size_t end) {
-        alignas(32) float sum[512];
+        Field field = prototype;
         for (std::size_t t = begin; t != end; ++t) {
             const LatticeLeaf& target = targets[t];
             const openvdb::Coord o = target.origin;
-            std::fill(sum, sum + 512, 0.f);
             const Vec3 lo = Vec3(o.x(), o.y(), o.z()) * h, hi = lo + Vec3::Constant(7 * h);
+            field.start(lo);
             const Vec3 cellLo = ((lo - reach) / cell).array().floor(), cellHi = ((hi + reach) / cell).array().floor();
             for (std::int64_t ca = std::int64_t(cellLo.x()); ca <= std::int64_t(cellHi.x()); ++ca)
                 for (std::int64_t cb = std::int64_t(cellLo.y()); cb <= std::int64_t(cellHi.y()); ++cb)
@@ -185,7 +185,7 @@ FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const KernelBins
                             if ((boxLo.array() > 7).any() || (boxHi.array() < 0).any()) continue;
                             const int aLo = std::max(0, int(boxLo.x())), aHi = std::min(7, int(boxHi.x()));
                             const int bLo = std::max(0, int(boxLo.y())), bHi = std::min(7, int(boxHi.y()));
-                                                        // A y in supports at point (a, b, c) of the leaf: u0 + a dx + b dy + c dz.
+                            // A y in supports at point (a, b, c) of the leaf: u0 + a dx + b dy + c dz.
                             const Mat3 m = e.shape * (h / support);
                             const Vec3 u0d = e.shape * (lo - e.centre) / support;
                             const float u0[3] = {float(u0d.x()), float(u0d.y()), float(u0d.z())};
@@ -195,38 +195,90 @@ FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const KernelBins
                             const float inverseStep = 1.f / (dz[0] * dz[0] + dz[1] * dz[1] + dz[2] * dz[2]);
                             for (int a = aLo; a <= aHi; ++a)
                                 for (int b = bLo; b <= bHi; ++b) {
-                                    const unsigned bits = rowBricks(target.bricks, a, b);
-                                    if (!bits) continue;
+                                    if (!rowBricks(target.bricks, a, b)) continue;
                                     float u[3];
                                     for (int d = 0; d < 3; ++d) u[d] = u0[d] + float(a) * dx[d] + float(b) * dy[d];
                                     // |u + c dz| < 1: c between the roots of a quadratic.
-                                    const float half = (u[0] * dz[0] + u[1] * dz[1] + u[2] * dz[2]) * inverseStep;
+                                    const float middle = (u[0] * dz[0] + u[1] * dz[1] + u[2] * dz[2]) * inverseStep;
                                     const float discriminant =
-                                        half * half - (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] - 1) * inverseStep;
+                                        middle * middle - (u[0] * u[0] + u[1] * u[1] + u[2] * u[2] - 1) * inverseStep;
                                     if (discriminant <= 0) continue;
-                                    // The whole row at once (one vector): the spline is zero outside.
-                                    const RowOfEight px = u[0] + kRowSteps * dz[0], py = u[1] + kRowSteps * dz[1],
-                                                     pz = u[2] + kRowSteps * dz[2];
-                                    Eigen::Map<RowOfEight>(sum + a * 64 + b * 8) +=
-                                        splineShape((px * px + py * py + pz * pz).sqrt());
+                                    // The whole row at once (one vector): the kernels are zero outside.
+                                    field.add(e, a, b, u[0] + kRowSteps * dz[0], u[1] + kRowSteps * dz[1],
+                                              u[2] + kRowSteps * dz[2]);
                                 }
                         }
                     }
-            auto* leaf = new FloatLeaf(o, float(iso), false);
+            auto* leaf = new FloatLeaf(o, background, false);
             float* values = leaf->buffer().data();
             for (int n = 0; n < 512; ++n)
                 if (rowBricks(target.bricks, n >> 6, (n >> 3) & 7) >> ((n & 7) >> 1) & 1u) {
-                    values[n] = float(iso) - scale * sum[n];
+                    values[n] = field.value(n);
                     leaf->setValueOn(openvdb::Index(n));
                 }
             made[t] = leaf;
         }
     }, 8);
-    FloatGrid::Ptr grid = FloatGrid::create(float(iso));
+    FloatGrid::Ptr grid = FloatGrid::create(background);
     grid->setTransform(openvdb::math::Transform::createLinearTransform(h));
     for (FloatLeaf* leaf : made) grid->tree().addLeaf(leaf);
     return grid;
 }
+
+// Yu & Turk's field: iso minus the kernels' (cubic spline) sum, each particle weighing one lattice cell (2r)^3.
+class SplineSum {
+public:
+    SplineSum(float scale, float iso) : m_scale(scale), m_iso(iso) {}
+    void start(const Vec3&) { std::fill(m_sum, m_sum + 512, 0.f); }
+    void add(const Ellipsoid&, int a, int b, const RowOfEight& px, const RowOfEight& py, const RowOfEight& pz) {
+        Eigen::Map<RowOfEight>(m_sum + a * 64 + b * 8) += splineShape((px * px + py * py + pz * pz).sqrt());
+    }
+    float value(int n) const { return m_iso - m_scale * m_sum[n]; }
+
+private:
+    float m_scale, m_iso;
+    alignas(32) float m_sum[512];
+};
+
+// The kernel sum on the chosen bricks of the target leaves, as iso minus the sum (negative inside) on active
+// voxels; background iso.
+FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
+                         const std::vector<LatticeLeaf>& targets, Real r, Real iso) {
+    const CubicSpline w(kKernelSupport * r);
+    const float scale = float(8 * r * r * r * w.W0());
+    return gatherRows(kernels, binned, targets, w.supportRadius(), float(iso), SplineSum(scale, float(iso)));
+}
+
+// Zhu & Bridson's field: the distance to the weighted mean of the particles within the search radius, less the
+// particle radius, with weights (1 - (d / search)^2)^3 (no square root); `far` where no particle is that close.
+class AveragedSpheres {
+public:
+    AveragedSpheres(float spacing, float radius, float far) : m_h(spacing), m_radius(radius), m_far(far) {}
+    void start(const Vec3& lo) {
+        m_lo = lo;
+        for (float* channel : {m_w, m_x, m_y, m_z}) std::fill(channel, channel + 512, 0.f);
+    }
+    void add(const Ellipsoid& e, int a, int b, const RowOfEight& px, const RowOfEight& py, const RowOfEight& pz) {
+        const RowOfEight t = (1.f - (px * px + py * py + pz * pz)).max(0.f), w = t * t * t;
+        const Vec3 c = e.centre - m_lo;  // small numbers: float keeps them to a micrometre
+        const int row = a * 64 + b * 8;
+        Eigen::Map<RowOfEight>(m_w + row) += w;
+        Eigen::Map<RowOfEight>(m_x + row) += w * float(c.x());
+        Eigen::Map<RowOfEight>(m_y + row) += w * float(c.y());
+        Eigen::Map<RowOfEight>(m_z + row) += w * float(c.z());
+    }
+    float value(int n) const {
+        if (!(m_w[n] > 0)) return m_far;
+        const float x = m_x[n] / m_w[n] - m_h * float(n >> 6), y = m_y[n] / m_w[n] - m_h * float((n >> 3) & 7),
+                    z = m_z[n] / m_w[n] - m_h * float(n & 7);
+        return std::sqrt(x * x + y * y + z * z) - m_radius;
+    }
+
+private:
+    float m_h, m_radius, m_far;
+    Vec3 m_lo = Vec3::Zero();
+    alignas(32) float m_w[512], m_x[512], m_y[512], m_z[512];
+};
 
 // Every leaf of the binned lattice that some kernel reaches (a cell of the bins is a leaf), all bricks chosen.
 std::vector<LatticeLeaf> leavesReached(const KernelBins& binned) {
@@ -248,13 +300,11 @@ std::vector<LatticeLeaf> leavesReached(const KernelBins& binned) {
     return out;
 }
 
-// The bricks (cells of the coarse lattice, named by their lowest corner) the surface may cross: a corner's kernel
-// sum between kSeedLow and kSeedHigh of the interior's, or corners on both sides of them. Each coarse leaf is read
-// from its buffer with a layer of its neighbours' points on every side (no accessor per corner), and decides the
-// bricks whose lowest corner it holds, and those one point below it whose own leaf the coarse grid lacks.
-openvdb::MaskGrid::Ptr bricksCrossed(const FloatGrid& coarse, Real interior) {
-    const float low = float(kSeedLow * interior), high = float(kSeedHigh * interior);
-    const float iso = coarse.background();
+// The bricks (cells of the coarse lattice, named by their lowest corner) the surface may cross: a corner whose value
+// lies between insideBelow and outsideAbove, or corners on both sides of them. Each coarse leaf is read from its
+// buffer with a layer of its neighbours' points on every side (no accessor per corner), and decides the bricks
+// whose lowest corner it holds, and those one point below it whose own leaf the coarse grid lacks.
+openvdb::MaskGrid::Ptr bricksCrossed(const FloatGrid& coarse, float insideBelow, float outsideAbove) {
     using MaskLeaf = openvdb::MaskTree::LeafNodeType;
     std::vector<const FloatLeaf*> leaves;
     leaves.reserve(coarse.tree().leafCount());
@@ -262,8 +312,7 @@ openvdb::MaskGrid::Ptr bricksCrossed(const FloatGrid& coarse, Real interior) {
     std::vector<MaskLeaf*> own(leaves.size(), nullptr);
     std::vector<std::vector<openvdb::Coord>> below(leaves.size());
     forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
-        // Per point of the leaf and the layer around it (index +1): 1 outside (sum at most low), 2 between,
-        // 4 inside (at least high).
+        // Per point of the leaf and the layer around it (index +1): 1 outside, 2 between, 4 inside.
         LeafNeighbourhood values;
         std::uint8_t kind[10][10][10];
         for (std::size_t l = begin; l != end; ++l) {
@@ -273,8 +322,8 @@ openvdb::MaskGrid::Ptr bricksCrossed(const FloatGrid& coarse, Real interior) {
             for (int i = -1; i <= 8; ++i)
                 for (int j = -1; j <= 8; ++j)
                     for (int k = -1; k <= 8; ++k) {
-                        const float sum = iso - values(i, j, k);
-                        const std::uint8_t bits = sum <= low ? 1 : sum >= high ? 4 : 2;
+                        const float value = values(i, j, k);
+                        const std::uint8_t bits = value >= outsideAbove ? 1 : value <= insideBelow ? 4 : 2;
                         kind[i + 1][j + 1][k + 1] = bits;
                         seen |= bits;
                     }
@@ -330,6 +379,19 @@ std::vector<LatticeLeaf> fineLeaves(const openvdb::MaskGrid& bricks) {
     return out;
 }
 
+// A narrow band of half width `band` [m] from a grid of signed distances: voxels at or past it leave the band, and
+// the inactive ones read as inside or outside by flood fill.
+void keepBand(FloatGrid& grid, float band) {
+    openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid.tree());
+    leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
+        for (auto it = leaf.beginValueOn(); it; ++it)
+            if (std::abs(*it) >= band) leaf.setValueOff(it.pos(), *it < 0 ? -band : band);
+    });
+    grid.tree().root().setBackground(band, false);
+    openvdb::tools::pruneInactive(grid.tree());
+    openvdb::tools::signedFloodFill(grid.tree());
+}
+
 // The signed distance from a field g (iso minus kernel sum) on its active voxels: g over the length of its
 // gradient, the distance to the surface to first order. Voxels within the half band stay active; the others take
 // the background with their sign.
@@ -366,13 +428,7 @@ void fieldToDistance(FloatGrid& field, Real voxel, Real halfBand) {
         }
     }, 16);
     leaves.swapLeafBuffer(1);
-    leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
-        for (auto it = leaf.beginValueOn(); it; ++it)
-            if (std::abs(*it) >= band) leaf.setValueOff(it.pos());
-    });
-    field.tree().root().setBackground(band, false);
-    openvdb::tools::pruneInactive(field.tree());
-    openvdb::tools::signedFloodFill(field.tree());
+    keepBand(field, band);
 }
 
 }  // namespace
@@ -387,11 +443,33 @@ FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxe
     const FloatGrid::Ptr coarse = kernelSum(kernels, coarseBins, leavesReached(coarseBins), r, 0.5 * interior);
     // The bricks the surface may cross, and around them as far as the band reaches (its half width and one voxel
     // for the gradient, in bricks of two voxels).
-    const openvdb::MaskGrid::Ptr bricks = bricksCrossed(*coarse, interior);
+    const openvdb::MaskGrid::Ptr bricks =
+        bricksCrossed(*coarse, float((0.5 - kSeedHigh) * interior), float((0.5 - kSeedLow) * interior));
     openvdb::tools::dilateActiveValues(bricks->tree(), int(std::ceil((halfBand + 1) / 2)),
                                        openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
     const FloatGrid::Ptr field = kernelSum(kernels, KernelBins(kernels, voxel), fineLeaves(*bricks), r, 0.5 * interior);
     fieldToDistance(*field, voxel, halfBand);
+    field->setGridClass(openvdb::GRID_LEVEL_SET);
+    return field;
+}
+
+FloatGrid::Ptr smoothSpheresLevelSet(const std::vector<Vec3>& x, Real radius, Real search, Real voxel, Real halfBand) {
+    // Round kernels of the search radius: the same gathering as the anisotropic kernels'.
+    std::vector<Ellipsoid> kernels(x.size());
+    for (std::size_t i = 0; i < x.size(); ++i) kernels[i] = {x[i], Mat3::Identity(), Vec3::Constant(search)};
+    const float band = float(halfBand * voxel), far = 2 * band;
+    // The bricks of two voxels whose corners lie on both sides of the surface, and around them as far as the band
+    // reaches. (Inside, the field stays near minus the radius instead of growing like a distance, so the band
+    // cannot be chosen by its values.)
+    const KernelBins coarseBins(kernels, 2 * voxel);
+    const FloatGrid::Ptr coarse = gatherRows(kernels, coarseBins, leavesReached(coarseBins), search, far,
+                                             AveragedSpheres(float(2 * voxel), float(radius), far));
+    const openvdb::MaskGrid::Ptr bricks = bricksCrossed(*coarse, 0.f, 0.f);
+    openvdb::tools::dilateActiveValues(bricks->tree(), int(std::ceil((halfBand + 1) / 2)),
+                                       openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
+    const FloatGrid::Ptr field = gatherRows(kernels, KernelBins(kernels, voxel), fineLeaves(*bricks), search, far,
+                                            AveragedSpheres(float(voxel), float(radius), far));
+    keepBand(*field, band);
     field->setGridClass(openvdb::GRID_LEVEL_SET);
     return field;
 }
