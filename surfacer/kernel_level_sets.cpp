@@ -280,6 +280,23 @@ private:
     alignas(32) float m_w[512], m_x[512], m_y[512], m_z[512];
 };
 
+// The union of spheres: the distance to the nearest sphere's surface (negative inside), `far` where no sphere's
+// support reaches.
+class NearestSphere {
+public:
+    NearestSphere(float support, float radius, float far) : m_support(support), m_radius(radius), m_far(far) {}
+    void start(const Vec3&) { std::fill(m_distance, m_distance + 512, m_far); }
+    void add(const Ellipsoid&, int a, int b, const RowOfEight& px, const RowOfEight& py, const RowOfEight& pz) {
+        Eigen::Map<RowOfEight> row(m_distance + a * 64 + b * 8);
+        row = row.min((px * px + py * py + pz * pz).sqrt() * m_support - m_radius);
+    }
+    float value(int n) const { return m_distance[n]; }
+
+private:
+    float m_support, m_radius, m_far;
+    alignas(32) float m_distance[512];
+};
+
 // Every leaf of the binned lattice that some kernel reaches (a cell of the bins is a leaf), all bricks chosen.
 std::vector<LatticeLeaf> leavesReached(const KernelBins& binned) {
     const UniformGrid& bins = binned.grid;
@@ -453,25 +470,44 @@ FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxe
     return field;
 }
 
-FloatGrid::Ptr smoothSpheresLevelSet(const std::vector<Vec3>& x, Real radius, Real search, Real voxel, Real halfBand) {
-    // Round kernels of the search radius: the same gathering as the anisotropic kernels'.
+namespace {
+
+// The narrow band of a field that is a distance near the surface, from round kernels of radius `support` around
+// the particles: the field (made by field(spacing) for a lattice's spacing) on the coarse lattice, the bricks of two
+// voxels whose corners lie on both sides of the surface, and around them as far as the band reaches, on the fine
+// one. (Inside, these fields stay near minus a particle's size instead of growing like a distance, so the band
+// cannot be chosen by their values.)
+template <class MakeField>
+FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real voxel, Real halfBand, MakeField&& field) {
     std::vector<Ellipsoid> kernels(x.size());
-    for (std::size_t i = 0; i < x.size(); ++i) kernels[i] = {x[i], Mat3::Identity(), Vec3::Constant(search)};
+    for (std::size_t i = 0; i < x.size(); ++i) kernels[i] = {x[i], Mat3::Identity(), Vec3::Constant(support)};
     const float band = float(halfBand * voxel), far = 2 * band;
-    // The bricks of two voxels whose corners lie on both sides of the surface, and around them as far as the band
-    // reaches. (Inside, the field stays near minus the radius instead of growing like a distance, so the band
-    // cannot be chosen by its values.)
     const KernelBins coarseBins(kernels, 2 * voxel);
-    const FloatGrid::Ptr coarse = gatherRows(kernels, coarseBins, leavesReached(coarseBins), search, far,
-                                             AveragedSpheres(float(2 * voxel), float(radius), far));
+    const FloatGrid::Ptr coarse =
+        gatherRows(kernels, coarseBins, leavesReached(coarseBins), support, far, field(2 * voxel, far));
     const openvdb::MaskGrid::Ptr bricks = bricksCrossed(*coarse, 0.f, 0.f);
     openvdb::tools::dilateActiveValues(bricks->tree(), int(std::ceil((halfBand + 1) / 2)),
                                        openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
-    const FloatGrid::Ptr field = gatherRows(kernels, KernelBins(kernels, voxel), fineLeaves(*bricks), search, far,
-                                            AveragedSpheres(float(voxel), float(radius), far));
-    keepBand(*field, band);
-    field->setGridClass(openvdb::GRID_LEVEL_SET);
-    return field;
+    const FloatGrid::Ptr fine =
+        gatherRows(kernels, KernelBins(kernels, voxel), fineLeaves(*bricks), support, far, field(voxel, far));
+    keepBand(*fine, band);
+    fine->setGridClass(openvdb::GRID_LEVEL_SET);
+    return fine;
+}
+
+}  // namespace
+
+FloatGrid::Ptr smoothSpheresLevelSet(const std::vector<Vec3>& x, Real radius, Real search, Real voxel, Real halfBand) {
+    return bandNearSurface(x, search, voxel, halfBand, [&](Real spacing, float far) {
+        return AveragedSpheres(float(spacing), float(radius), far);
+    });
+}
+
+FloatGrid::Ptr sphereUnionLevelSet(const std::vector<Vec3>& x, Real radius, Real voxel, Real halfBand) {
+    const Real support = radius + halfBand * voxel;  // where a sphere's own distance leaves the band
+    return bandNearSurface(x, support, voxel, halfBand, [&](Real, float far) {
+        return NearestSphere(float(support), float(radius), far);
+    });
 }
 
 }  // namespace ganache::surfacing

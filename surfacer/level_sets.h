@@ -33,6 +33,10 @@ openvdb::FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, 
 openvdb::FloatGrid::Ptr smoothSpheresLevelSet(const std::vector<Vec3>& x, Real radius, Real search, Real voxel,
                                               Real halfBand);
 
+/// The union of spheres of `radius` [m] around the particles: its narrow-band level set of half-width halfBand
+/// voxels, inside included where the band reaches.
+openvdb::FloatGrid::Ptr sphereUnionLevelSet(const std::vector<Vec3>& x, Real radius, Real voxel, Real halfBand);
+
 /// `passes` steps of mean-curvature flow, each followed by one renormalisation (smoothing.cpp).
 void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes);
 

@@ -12,7 +12,6 @@
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetFilter.h>
 #include <openvdb/tools/LevelSetUtil.h>
-#include <openvdb/tools/ParticlesToLevelSet.h>
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
@@ -46,9 +45,10 @@ void initialiseOpenVdb() {
 
 // --- the narrow band ----------------------------------------------------------------------------------------
 
-// Rasterisers leave much of the fluid's inside active (overlapping spheres; Zhu-Bridson's distances to averaged
-// positions stay small deep inside): three times the band's voxels, and the smoothing's cost with them. Keeps only
-// the voxels within the half band of a sign change; the rest reads as inside or outside by flood fill.
+// The spheres' fields leave part of the fluid's inside active (the bricks evaluated around the surface, where
+// the nearest sphere is never far and Zhu-Bridson's mean stays near the point, so that their values stay inside
+// the band), and the smoothing's cost with it. Keeps only the voxels within the half band of a sign change; the
+// rest reads as inside or outside by flood fill.
 void trimToBand(FloatGrid& grid) {
     grid.tree().voxelizeActiveTiles();
     openvdb::MaskGrid::Ptr band = openvdb::MaskGrid::create();
@@ -78,19 +78,8 @@ void trimToBand(FloatGrid& grid) {
 
 // --- spheres -----------------------------------------------------------------------------------------------
 
-struct SphereList {
-    using PosType = openvdb::Vec3R;
-    const std::vector<Vec3>& x;
-    std::size_t size() const { return x.size(); }
-    void getPos(std::size_t n, openvdb::Vec3R& p) const { p = openvdb::Vec3R(x[n].x(), x[n].y(), x[n].z()); }
-};
-
 FloatGrid::Ptr spheres(const std::vector<Vec3>& x, Real r, Real voxel) {
-    FloatGrid::Ptr grid = openvdb::createLevelSet<FloatGrid>(voxel, kHalfBand);
-    openvdb::tools::ParticlesToLevelSet<FloatGrid> raster(*grid);
-    raster.setRmin(0.5);  // radii are in voxels; coarse voxels must not drop particles
-    raster.rasterizeSpheres(SphereList{x}, kSphereRadius * r);
-    raster.finalize(true);
+    const FloatGrid::Ptr grid = surfacing::sphereUnionLevelSet(x, kSphereRadius * r, voxel, kHalfBand);
     trimToBand(*grid);
     openvdb::tools::LevelSetFilter<FloatGrid> filter(*grid);
     // The offset moves the surface half a voxel at a time, renormalising the band after each move: two
