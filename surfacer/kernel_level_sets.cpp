@@ -1,12 +1,12 @@
-// Level sets from sums over particles' kernels, taken only where the surface can be: Yu & Turk's anisotropic
-// kernels (2013) and Zhu & Bridson's smooth spheres (2005).
+// Level sets from fields gathered over particles' kernels, taken only where the surface can be: Yu & Turk's
+// anisotropic kernels (2013), Zhu & Bridson's smooth spheres (2005) and the plain union of spheres.
 //
-// Summing over every voxel a kernel reaches (about 2,000 per particle) was most of a frame's time. Here a field is
+// Visiting every voxel a kernel reaches (about 2,000 per particle) was most of a frame's time. Here a field is
 // taken in two passes: first on a coarse lattice of two voxels' spacing, which finds the bricks of 2^3 voxels the
 // surface can cross; then on the voxels of those bricks and of the bricks around them, as wide as the narrow band.
 // For anisotropic kernels the signed distance is the kernel sum's distance from the iso value over its gradient,
-// exact to first order at the surface, so that no level set needs rebuilding from a mesh; Zhu & Bridson's field is a
-// distance near the surface already.
+// exact to first order at the surface, so that no level set needs rebuilding from a mesh; the spheres' fields are
+// distances near the surface already.
 
 #include "surfacer/level_sets.h"
 
@@ -68,8 +68,9 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                 for (int b = -1; b <= 1; ++b)
                     for (int d = -1; d <= 1; ++d) {
                         const std::int64_t found = grid.findCell(k[0] + a, k[1] + b, k[2] + d);
-                        if (found >= 0)
-                            around[cells++] = {grid.cellBegin(std::size_t(found)), grid.cellBegin(std::size_t(found) + 1)};
+                        if (found < 0) continue;
+                        const std::size_t cell = std::size_t(found);
+                        around[cells++] = {grid.cellBegin(cell), grid.cellBegin(cell + 1)};
                     }
             for (std::size_t s = grid.cellBegin(c); s != grid.cellBegin(c + 1); ++s) {
                 // Weighted sums over the neighbourhood, itself included, w = 1 - (d / support)^3, of the offsets
@@ -101,7 +102,8 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                     eigen.computeDirect(covariance);
                     Vec3 scale = eigen.eigenvalues().cwiseMax(eigen.eigenvalues().maxCoeff() / kMaxStretch);
                     scale /= std::cbrt(scale.prod());  // keep the kernel's volume: the interior's sum does not change
-                    e.shape = eigen.eigenvectors() * scale.cwiseInverse().asDiagonal() * eigen.eigenvectors().transpose();
+                    const Mat3& axes = eigen.eigenvectors();
+                    e.shape = axes * scale.cwiseInverse().asDiagonal() * axes.transpose();
                 }
                 // The ellipsoid {y : |A y| < support} = A^-1 (ball); its box's half size along axis k is
                 // support |row_k A^-1|.
@@ -152,13 +154,15 @@ inline unsigned rowBricks(std::uint64_t bricks, int a, int b) {
 
 // Visits, for each target leaf of a lattice of spacing h [m] (point ijk at h ijk), every row along z of its chosen
 // bricks that a kernel reaches: field.add(kernel, a, b, px, py, pz) with the row's points in the kernel's own
-// coordinates (A y / support; inside where |p| < 1), after field.start(leaf origin); field.finish(leaf) then writes
-// the leaf's values. Each leaf gathers the kernels whose boxes reach it from a grid of their centres, in that grid's
-// fixed order: deterministic for any thread count. Along a row the ellipsoid is an interval, found from a
-// quadratic, so rows that miss it are skipped. Returns the grid of the leaves made (background `background`).
+// coordinates (A y / support; inside where |p| < 1), after field.start(leaf's lowest point [m]); field.value(n)
+// then gives each chosen point's value. Each leaf gathers the kernels whose boxes reach it from a grid of their
+// centres, in that grid's fixed order: deterministic for any thread count. Along a row the ellipsoid is an
+// interval, found from a quadratic, so rows that miss it are skipped. Returns the grid of the leaves made
+// (background `background`).
 template <class Field>
 FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
-                          const std::vector<LatticeLeaf>& targets, Real support, float background, const Field& prototype) {
+                          const std::vector<LatticeLeaf>& targets, Real support, float background,
+                          const Field& prototype) {
     const Real h = binned.h, cell = 8 * h;
     const Vec3& reach = binned.reach;
     const UniformGrid& bins = binned.grid;
@@ -349,7 +353,8 @@ openvdb::MaskGrid::Ptr bricksCrossed(const FloatGrid& coarse, float insideBelow,
             for (int a = 0; a < 2; ++a)
                 for (int b = 0; b < 2; ++b)
                     for (int c = 0; c < 2; ++c)
-                        leafBelow[a][b][c] = coarse.tree().probeConstLeaf(o.offsetBy(8 * (a - 1), 8 * (b - 1), 8 * (c - 1)));
+                        leafBelow[a][b][c] =
+                            coarse.tree().probeConstLeaf(o.offsetBy(8 * (a - 1), 8 * (b - 1), 8 * (c - 1)));
             for (int i = -1; i < 8; ++i)
                 for (int j = -1; j < 8; ++j)
                     for (int k = -1; k < 8; ++k) {
@@ -409,6 +414,16 @@ void keepBand(FloatGrid& grid, float band) {
     openvdb::tools::signedFloodFill(grid.tree());
 }
 
+// The fine leaves (lattice of spacing voxel) to evaluate: the coarse lattice's crossed bricks (bricksCrossed) and
+// around them as far as the band reaches (its half width and one voxel for a gradient, in bricks of two voxels).
+std::vector<LatticeLeaf> bricksNearSurface(const FloatGrid& coarse, float insideBelow, float outsideAbove,
+                                           Real halfBand) {
+    const openvdb::MaskGrid::Ptr bricks = bricksCrossed(coarse, insideBelow, outsideAbove);
+    openvdb::tools::dilateActiveValues(bricks->tree(), int(std::ceil((halfBand + 1) / 2)),
+                                       openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
+    return fineLeaves(*bricks);
+}
+
 // The signed distance from a field g (iso minus kernel sum) on its active voxels: g over the length of its
 // gradient, the distance to the surface to first order. Voxels within the half band stay active; the others take
 // the background with their sign.
@@ -458,13 +473,9 @@ FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxe
     const std::vector<Ellipsoid> kernels = anisotropicKernels(x, r);
     const KernelBins coarseBins(kernels, 2 * voxel);
     const FloatGrid::Ptr coarse = kernelSum(kernels, coarseBins, leavesReached(coarseBins), r, 0.5 * interior);
-    // The bricks the surface may cross, and around them as far as the band reaches (its half width and one voxel
-    // for the gradient, in bricks of two voxels).
-    const openvdb::MaskGrid::Ptr bricks =
-        bricksCrossed(*coarse, float((0.5 - kSeedHigh) * interior), float((0.5 - kSeedLow) * interior));
-    openvdb::tools::dilateActiveValues(bricks->tree(), int(std::ceil((halfBand + 1) / 2)),
-                                       openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
-    const FloatGrid::Ptr field = kernelSum(kernels, KernelBins(kernels, voxel), fineLeaves(*bricks), r, 0.5 * interior);
+    const std::vector<LatticeLeaf> fine =
+        bricksNearSurface(*coarse, float((0.5 - kSeedHigh) * interior), float((0.5 - kSeedLow) * interior), halfBand);
+    const FloatGrid::Ptr field = kernelSum(kernels, KernelBins(kernels, voxel), fine, r, 0.5 * interior);
     fieldToDistance(*field, voxel, halfBand);
     field->setGridClass(openvdb::GRID_LEVEL_SET);
     return field;
@@ -473,10 +484,10 @@ FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxe
 namespace {
 
 // The narrow band of a field that is a distance near the surface, from round kernels of radius `support` around
-// the particles: the field (made by field(spacing) for a lattice's spacing) on the coarse lattice, the bricks of two
-// voxels whose corners lie on both sides of the surface, and around them as far as the band reaches, on the fine
-// one. (Inside, these fields stay near minus a particle's size instead of growing like a distance, so the band
-// cannot be chosen by their values.)
+// the particles: the field (field(spacing, far) for a lattice's spacing and the value where no kernel reaches) on
+// the coarse lattice, then on the fine one near the bricks whose corners lie on both sides of the surface. (Inside,
+// these fields stay near minus a particle's size instead of growing like a distance, so the band cannot be chosen
+// by their values.)
 template <class MakeField>
 FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real voxel, Real halfBand, MakeField&& field) {
     std::vector<Ellipsoid> kernels(x.size());
@@ -485,11 +496,9 @@ FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real vo
     const KernelBins coarseBins(kernels, 2 * voxel);
     const FloatGrid::Ptr coarse =
         gatherRows(kernels, coarseBins, leavesReached(coarseBins), support, far, field(2 * voxel, far));
-    const openvdb::MaskGrid::Ptr bricks = bricksCrossed(*coarse, 0.f, 0.f);
-    openvdb::tools::dilateActiveValues(bricks->tree(), int(std::ceil((halfBand + 1) / 2)),
-                                       openvdb::tools::NN_FACE_EDGE_VERTEX, openvdb::tools::IGNORE_TILES);
+    const std::vector<LatticeLeaf> targets = bricksNearSurface(*coarse, 0.f, 0.f, halfBand);
     const FloatGrid::Ptr fine =
-        gatherRows(kernels, KernelBins(kernels, voxel), fineLeaves(*bricks), support, far, field(voxel, far));
+        gatherRows(kernels, KernelBins(kernels, voxel), targets, support, far, field(voxel, far));
     keepBand(*fine, band);
     fine->setGridClass(openvdb::GRID_LEVEL_SET);
     return fine;

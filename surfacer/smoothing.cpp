@@ -125,8 +125,9 @@ void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes) {
         // (15 % more folded edges in the default scene's adaptive meshes).
         openvdb::tools::dilateActiveValues(grid.tree(), 1, openvdb::tools::NN_FACE, openvdb::tools::IGNORE_TILES);
         openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid.tree(), 1);
-        eachActiveVoxel(leaves, grid.tree(),
-                        [&](const LeafNeighbourhood& p, int i, int j, int k) { return renormaliseStep(p, i, j, k, voxel); });
+        eachActiveVoxel(leaves, grid.tree(), [&](const LeafNeighbourhood& p, int i, int j, int k) {
+            return renormaliseStep(p, i, j, k, voxel);
+        });
         // Voxels now past the band's half width leave it, keeping their side.
         leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
             for (auto it = leaf.beginValueOn(); it; ++it)
