@@ -335,8 +335,13 @@ void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& partic
 
 void PressureDFSPH::solveDensity(StepContext& ctx, ParticleSet& particles) {
     const Real dt = ctx.dt;
-    // rho* - rho_0 = rho + dt Drho/Dt - rho_0 [BK17 Eq. 8]
+    // rho* - rho_0 = rho + dt Drho/Dt - rho_0 [BK17 Eq. 8], of which a rigid particle's compression counts only its
+    // share PressureSettings::rigidCorrection.
+    const std::vector<Real>* rigid = particles.find(attribute::kViscouslyRigid);
+    const Real share = m_settings.rigidCorrection;
     ctx.stats.pressureIterations += solve(Solve::Density, ctx, particles, *m_pressure, [&](std::size_t i, Real rate) {
+        const Real excess = ctx.density[i] - ctx.restDensity[i];
+        if (excess > 0 && rigid && (*rigid)[i] != 0) return share * excess + dt * rate;
         return ctx.density[i] + dt * rate - ctx.restDensity[i];
     });
 }
