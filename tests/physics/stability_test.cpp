@@ -94,7 +94,7 @@ void expectStable(const Simulation& sim, const Snapshot& start, const Vec3& lo, 
 
 const Vec3 kTankLo(0, 0, 0), kTankHi(0.2, 0.3, 0.2);
 
-// A 10 x 10 x 10 block of honey (r = 5 mm; 10 k particles a side at refinement k) in a closed tank of 0.2 m,
+// A 10 cm block of honey (r = 5 mm by default: 10 k particles a side at refinement k) in a closed tank of 0.2 m,
 // falling under gravity, with viscosity mu (and boundary viscosity boundaryMu); none when mu is negative.
 World blockInTank(Real mu, Real boundaryMu = 0, Real r = radius()) {
     World world(r, Vec3(-0.1, -0.1, -0.1), Vec3(0.3, 0.4, 0.3));
@@ -351,5 +351,3 @@ TEST(Stability, StiffBodyWithAThinArmRestsOnASlippingFloor) {
     EXPECT_LT(std::abs(spin / inertia), 0.01);
     EXPECT_LT(maxSpeed(p), 0.05);
 }
-
-
