@@ -1,14 +1,17 @@
 // coil_metrics: where a viscous rope lays itself down, frame by frame, for the rope-coiling scene
 // (scenes/coiling.yaml; [WKBB18] Fig. 6, "a coil radius about constant").
 //
-//   coil_metrics [--axis X Z] [--slow SPEED] [--below HEIGHT] [--window N] [--from T0] [--to T1] CACHE...
+//   coil_metrics [--axis X Z] [--slow SPEED] [--below HEIGHT] [--window N] [--falling SPEED] [--from T0] [--to T1]
+//                CACHE...
 //
 // An emitter numbers its particles in the order it emits them, so along the rope the ids grow from the laid end to
 // the nozzle. The rope has come to rest where its particles move slower than SPEED (default 0.1 m/s) below HEIGHT
 // (default 0.06 m; a rope standing up to the nozzle is not laid); the N laid particles with the highest ids (default
 // 64, a few layers of the stream) are the newest laid piece, and their centroid is where the rope touches down. The
 // coil radius is that point's horizontal distance from the coil's centre, the centroid of all the laid rope (or a
-// fixed vertical axis through X, Z, such as the nozzle's), its angle the direction about it.
+// fixed vertical axis through X, Z, such as the nozzle's), its angle the direction about it. With --falling the
+// touchdown is instead the centroid of the N lowest particles moving down faster than SPEED: the bottom of the
+// falling stream, which the pile's own jostling (particles speeding up and slowing down in it) cannot move.
 //
 // Prints one JSON object: per frame the time, the laid particles, the touchdown height, radius and angle; over the
 // frames with T0 <= t <= T1 (default: all) the mean radius and its coefficient of variation (standard deviation over
@@ -40,6 +43,7 @@ struct Touchdown {
 struct Options {
     bool axis = false;  // a fixed axis instead of the laid rope's centroid
     Real axisX = 0, axisZ = 0, slow = 0.1, below = 0.06;
+    Real falling = 0;  // > 0: the touchdown is the bottom of the stream falling faster than this [m/s]
     std::size_t window = 64;
 };
 
@@ -58,6 +62,18 @@ Touchdown touchdown(const CacheContents& cache, const Options& o) {
     if (n == 0) return t;
     c /= Real(n);
     pile /= Real(t.laid);
+    if (o.falling > 0) {
+        // The bottom of the falling stream instead: the N lowest particles moving down faster than `falling`.
+        std::vector<std::pair<Real, std::size_t>> stream;
+        for (std::size_t i = 0; i < p.size(); ++i)
+            if (p.v()[i].y() < -o.falling) stream.emplace_back(p.x()[i].y(), i);
+        const std::size_t m = std::min(o.window, stream.size());
+        if (m == 0) return Touchdown{t.time};  // nothing falling: no touchdown to measure
+        std::partial_sort(stream.begin(), stream.begin() + std::ptrdiff_t(m), stream.end());
+        c = Vec3::Zero();
+        for (std::size_t k = 0; k < m; ++k) c += p.x()[stream[k].second];
+        c /= Real(m);
+    }
     const Real cx = o.axis ? o.axisX : pile.x(), cz = o.axis ? o.axisZ : pile.z();
     t.height = c.y();
     t.radius = std::hypot(c.x() - cx, c.z() - cz);
@@ -83,6 +99,8 @@ int main(int argc, char** argv) {
                 o.slow = value();
             } else if (arg == "--below") {
                 o.below = value();
+            } else if (arg == "--falling") {
+                o.falling = value();
             } else if (arg == "--window") {
                 o.window = std::size_t(std::max(1.0, value()));
             } else if (arg == "--from") {
