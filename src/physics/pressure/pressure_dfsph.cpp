@@ -342,7 +342,7 @@ void PressureDFSPH::solveDensity(StepContext& ctx, ParticleSet& particles) {
     ctx.stats.pressureIterations += solve(Solve::Density, ctx, particles, *m_pressure, [&](std::size_t i, Real rate) {
         const Real excess = ctx.density[i] - ctx.restDensity[i];
         if (excess > 0 && rigid && (*rigid)[i] != 0) return share * excess + dt * rate;
-        return ctx.density[i] + dt * rate - ctx.restDensity[i];
+        return ctx.density[i] + dt * rate - ctx.restDensity[i];  // summed in this order, runny fluids' bytes stay
     });
 }
 
