@@ -33,8 +33,9 @@ struct ViscosityParams : EffectParams {
     /// with half the CG iterations (docs/benchmarks.md).
     Real tolerance = 1e-2;
     /// The tolerance of solves with stiff particles (stiffness dt mu / (rho h^2) from 3,000, where the clusters
-    /// join the preconditioner), when it is the smaller: there it decides how stiff the fluid stays. A 5e6 Pa s body
-    /// on a slipping floor kept parts moving at 3.7 cm/s at 1e-2, 0.55 cm/s at 1e-3 (with the clusters).
+    /// join the preconditioner) or with viscosities that differ between particles, when it is the smaller: there it
+    /// decides how stiff the fluid stays (a 5e6 Pa s body on a slipping floor kept parts moving at 3.7 cm/s at 1e-2,
+    /// 0.55 cm/s at 1e-3, with the clusters) and whether the runny particles beside stiffer ones move as they should.
     Real stiffTolerance = 1e-3;
     std::int64_t maxIterations = 100;  ///< CG iterations per solve; explicit: sub-steps per step (default 10,000)
     /// none, 3x3 block Jacobi, or block Jacobi plus a coarse space (two-level, weiler2018 only): the rigid motions of
