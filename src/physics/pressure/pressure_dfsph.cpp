@@ -27,10 +27,10 @@ constexpr Real kRelaxation = 0.5;
 // How far below its rest density a particle is taken to have come apart from its neighbours (a free surface, a film
 // tearing), so that the pressure it held last step is not applied again. Reapplied, that pressure pushed its neighbours
 // away every step, and the constant-density solve, whose stopping test is the mean over all particles, never took it
-// back: in the default scene at final quality a molten film's particles left the plate at up to 1 m/s (0.24 without
-// it; the rest is drips falling). 1 % is a hundred times the default density tolerance, so the warm start of a body's
-// supporting pressure, within it, stays whole; below rest density at all (SPlisHSPlasH's rule) the 8k anchor block
-// took 7.8 constant-density iterations a step instead of 3.0.
+// back: in the default scene at final quality a molten film's particles left the plate at up to 1 m/s (with this rule
+// the fastest is a drip falling at 0.24 m/s). 1 % is a hundred times the default density tolerance, so the warm start
+// of a body's supporting pressure, within it, stays whole; below rest density at all (SPlisHSPlasH's rule) the 8k
+// anchor block took 7.8 constant-density iterations a step instead of 3.0.
 constexpr Real kSeparated = 0.01;
 
 // The constant-density pressure kappa / rho of the last step: the next step's warm start.
