@@ -160,36 +160,45 @@ public:
         // Conduction [Eq. 15-16], written per pair so that the heat one particle gains the other loses:
         // m_i c_i dT_i/dt = 2 sum_j k_ij V_i V_j (T_i - T_j) F_ij, with F_ij <= 0 and k_ij the mean conductivity;
         // bodies at a set temperature T_b join the sum with their boundary volumes V_k.
+        // The pair coefficients depend on the positions only: taken once a step, every sub-step reuses them.
+        const auto& f = ctx.fluidNeighbours;
+        const auto& b = ctx.boundaryNeighbours;
+        const auto conducts = [&](std::uint32_t k) { return !std::isnan(m_bodyTemperature[ctx.boundary.body[k]]); };
         m_rate.resize(n);
         m_diagonal.resize(n);
+        m_pair.resize(f.pairs());
+        m_boundaryPair.resize(b.pairs());
         const Real h2 = ctx.kernel.supportRadius() * ctx.kernel.supportRadius();
+        forEachParticle(n, [&](std::size_t i) {
+            const std::size_t si = source(i);
+            const Real vi = m[i] / rho[i];
+            Real diagonal = 0;
+            for (std::size_t p = f.first(i); p < f.last(i); ++p) {
+                const std::uint32_t j = f.indices[p];
+                const Real kij = 0.5 * (m_conductivity[si] + m_conductivity[source(j)]);
+                m_pair[p] = 2 * kij * vi * (m[j] / rho[j]) * laplacianWeight(x[i] - x[j], ctx.gradients.fluid[p], h2);
+                diagonal -= m_pair[p];
+            }
+            for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+                const std::uint32_t k = b.indices[p];
+                if (!conducts(k)) continue;
+                const std::uint32_t body = ctx.boundary.body[k];
+                const Real kib = m_bodyConductivity[body] >= 0 ? m_bodyConductivity[body] : m_conductivity[si];
+                m_boundaryPair[p] = 2 * kib * vi * ctx.boundary.volume[k] *
+                                    laplacianWeight(x[i] - ctx.boundary.x[k], ctx.gradients.boundary[p], h2);
+                diagonal -= m_boundaryPair[p];
+            }
+            m_diagonal[i] = diagonal / (m[i] * m_capacity[si]);
+        });
         auto rates = [&] {
             forEachParticle(n, [&](std::size_t i) {
-                const std::size_t si = source(i);
-                const Real vi = m[i] / rho[i];
-                Real sum = 0, diagonal = 0;
-                const auto& f = ctx.fluidNeighbours;
-                for (std::size_t p = f.first(i); p < f.last(i); ++p) {
-                    const std::uint32_t j = f.indices[p];
-                    const Real kij = 0.5 * (m_conductivity[si] + m_conductivity[source(j)]);
-                    const Real c = 2 * kij * vi * (m[j] / rho[j]) * laplacianWeight(x[i] - x[j], ctx.gradients.fluid[p], h2);
-                    sum += c * (T[i] - T[j]);
-                    diagonal -= c;
-                }
-                const auto& b = ctx.boundaryNeighbours;
+                Real sum = 0;
+                for (std::size_t p = f.first(i); p < f.last(i); ++p) sum += m_pair[p] * (T[i] - T[f.indices[p]]);
                 for (std::size_t p = b.first(i); p < b.last(i); ++p) {
                     const std::uint32_t k = b.indices[p];
-                    const std::uint32_t body = ctx.boundary.body[k];
-                    if (std::isnan(m_bodyTemperature[body])) continue;
-                    const Real kib = m_bodyConductivity[body] >= 0 ? m_bodyConductivity[body] : m_conductivity[si];
-                    const Real c = 2 * kib * vi * ctx.boundary.volume[k] *
-                                   laplacianWeight(x[i] - ctx.boundary.x[k], ctx.gradients.boundary[p], h2);
-                    sum += c * (T[i] - m_bodyTemperature[body]);
-                    diagonal -= c;
+                    if (conducts(k)) sum += m_boundaryPair[p] * (T[i] - m_bodyTemperature[ctx.boundary.body[k]]);
                 }
-                const Real mc = m[i] * m_capacity[si];
-                m_rate[i] = sum / mc;
-                m_diagonal[i] = diagonal / mc;
+                m_rate[i] = sum / (m[i] * m_capacity[source(i)]);
             });
         };
         rates();
@@ -243,6 +252,7 @@ private:
     std::vector<Real> m_bodyTemperature;           // per boundary body; NaN: does not conduct
     std::vector<Real> m_bodyConductivity;
     std::vector<Real> m_rate, m_diagonal;
+    std::vector<Real> m_pair, m_boundaryPair;  // conduction coefficients of the step's fluid and boundary pairs
     std::size_t m_substeps = 0, m_substepsMax = 0;  // over the run
 };
 
