@@ -17,5 +17,8 @@ inline constexpr Attribute<Real> kRestDensity{"_rest_density", false};
 /// 1 where the last implicit viscosity solve found the particle stiff enough to move with its neighbours as one
 /// body, else 0; present only with the weiler2018 viscosity. The pressure warm start reads it (PressureDFSPH).
 inline constexpr Attribute<Real> kViscouslyRigid{"_viscously_rigid", false};
+/// The constant-density pressure kappa / rho of the last step: the next step's warm start (PressureDFSPH). Checkpoints
+/// carry it; the stability tests set it to stage a pressure left on particles that have since come apart.
+inline constexpr Attribute<Real> kPressureWarmStart{"_pressure", false};
 
 }  // namespace ganache::attribute

@@ -189,7 +189,7 @@ TEST(Stability, PressureIsNotCarriedOverToParticlesThatCameApart) {
         const auto inLayer = [](const Vec3& x) { return x.x() > 0.14; };
         if (pressed) {
             SimulationState state = sim.state();
-            std::vector<Real>& pressure = *state.fluid.findScalar("_pressure");
+            std::vector<Real>& pressure = *state.fluid.find(attribute::kPressureWarmStart);
             const Real most = *std::max_element(pressure.begin(), pressure.end());
             for (std::size_t i = 0; i < pressure.size(); ++i)
                 if (inLayer(state.fluid.x()[i])) pressure[i] = most;

@@ -33,13 +33,10 @@ constexpr Real kRelaxation = 0.5;
 // anchor block took 7.8 constant-density iterations a step instead of 3.0.
 constexpr Real kSeparated = 0.01;
 
-// The constant-density pressure kappa / rho of the last step: the next step's warm start.
-constexpr Attribute<Real> kPressure{"_pressure", false};
-
 }  // namespace
 
 PressureDFSPH::PressureDFSPH(const PressureSettings& settings, ParticleSet& particles)
-    : m_settings(settings), m_pressure(&particles.add(kPressure)) {}
+    : m_settings(settings), m_pressure(&particles.add(attribute::kPressureWarmStart)) {}
 
 void PressureDFSPH::rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u,
                           bool withBodies, std::vector<Real>& out) const {
@@ -94,12 +91,10 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
 
 void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Real scale, Real support) {
     auto& s = *m_pressure;
-    if (scale != 1)
-        for (Real& p : s) p *= scale;
     // A particle well below its rest density has come apart from its neighbours, and the pressure it held last step
     // can only push them further apart: see kSeparated.
     forEachParticle(particles.size(), [&](std::size_t i) {
-        if (ctx.density[i] < (1 - kSeparated) * ctx.restDensity[i]) s[i] = 0;
+        s[i] = ctx.density[i] < (1 - kSeparated) * ctx.restDensity[i] ? 0 : s[i] * scale;
     }, 4096);
     auto& v = particles.v();
     velocityChanges(ctx, particles, s, m_velocityChange);
