@@ -234,6 +234,56 @@ TEST(Surfacer, PlyMeshesRoundTripAndAreSmallerThanObj) {
     EXPECT_THROW(readPly(dir / "ganache_text.ply"), InputError);
 }
 
+// The OBJ mesh reads back as written (nine significant digits: 1e-9 m on a 0.1 m ball, float temperatures exactly),
+// and a damaged file is named with its line, not misread.
+TEST(Surfacer, ObjMeshesRoundTripAndDamagedLinesAreNamed) {
+    ParticleSet p = latticeBall(Vec3::Zero(), 0.1);
+    auto& t = p.addScalar("temperature", 0);
+    for (std::size_t i = 0; i < p.size(); ++i) t[i] = p.x()[i].x() > 0 ? 50.25f : 20.1f;
+    SurfaceSettings s = settingsFor(SurfaceMethod::Anisotropic);
+    s.meshTemperature = true;
+    const FrameSurface frame = surfaceParticles(p, kR, s);
+    const SurfaceMesh& mesh = frame.mesh();
+    ASSERT_GT(mesh.triangles.size(), 1000u);
+    const auto dir = std::filesystem::temp_directory_path();
+    writeObj(dir / "ganache_ball_rt.obj", mesh, "a ball\nunits: metres");
+    const SurfaceMesh back = readObj(dir / "ganache_ball_rt.obj");
+    ASSERT_EQ(back.points.size(), mesh.points.size());
+    EXPECT_EQ(back.triangles, mesh.triangles);
+    EXPECT_EQ(back.temperature, mesh.temperature);
+    for (std::size_t k = 0; k < mesh.points.size(); ++k) {
+        EXPECT_LT((back.points[k] - mesh.points[k]).norm(), 1e-9);
+        EXPECT_LT((back.normals[k] - mesh.normals[k]).norm(), 1e-8);
+    }
+
+    const auto expectError = [&](const std::string& text, const std::string& where, const std::string& what) {
+        const auto file = dir / "ganache_damaged.obj";
+        std::ofstream(file) << text;
+        try {
+            readObj(file);
+            ADD_FAILURE() << "read without an error: " << text;
+        } catch (const InputError& e) {
+            const std::string message = e.what();
+            EXPECT_NE(message.find("ganache_damaged.obj:" + where + ":"), std::string::npos) << message;
+            EXPECT_NE(message.find(what), std::string::npos) << message;
+        }
+    };
+    const std::string ok = "# header\nv 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    expectError(ok + "v 1 2\n", "5", "a v line needs three numbers");
+    expectError(ok + "vn 1 2 nan\n", "5", "a vn line needs three numbers");
+    expectError(ok + "vt\n", "5", "a vt line needs a number");
+    expectError(ok + "f 1 2\n", "5", "faces must be triangles");
+    expectError(ok + "f 1 2 3 1\n", "5", "faces must be triangles");
+    expectError(ok + "f 1//1 2//x 3//3\n", "5", "'2//x' is not a face corner");
+    expectError(ok + "f 1 2 4\n", "5", "a face uses vertex 4, which does not exist");
+    EXPECT_EQ(readObj([&] {
+                  std::ofstream(dir / "ganache_crlf.obj") << "v 0 0 0\r\nv 1 0 0\r\nv 0 1 0\r\nf 1 2 3\r\n";
+                  return dir / "ganache_crlf.obj";
+              }()).triangles.size(),
+              1u);
+    EXPECT_THROW(readObj(dir / "ganache_no_such_mesh.obj"), InputError);
+}
+
 INSTANTIATE_TEST_SUITE_P(Surfacer, EveryMethod,
                          ::testing::Values(SurfaceMethod::Spheres, SurfaceMethod::SmoothSpheres,
                                            SurfaceMethod::Anisotropic),
