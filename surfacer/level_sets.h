@@ -40,8 +40,8 @@ openvdb::FloatGrid::Ptr sphereUnionLevelSet(const std::vector<Vec3>& x, Real rad
 /// `passes` steps of mean-curvature flow, each followed by one renormalisation (smoothing.cpp).
 void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes);
 
-/// Moves the surface inward by `distance` [m] half a voxel at a time, renormalising the band twice after each move
-/// (smoothing.cpp).
+/// Moves the surface inward by `distance` [m] in equal moves of at most half a voxel, renormalising the band twice
+/// after each move (smoothing.cpp).
 void offsetLevelSet(openvdb::FloatGrid& grid, float distance);
 
 }  // namespace ganache::surfacing

@@ -145,17 +145,17 @@ void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes) {
 void offsetLevelSet(openvdb::FloatGrid& grid, float distance) {
     if (grid.tree().leafCount() == 0) return;
     const float voxel = float(grid.voxelSize()[0]);
-    // Half a voxel at a time, renormalised twice after each move, as OpenVDB's offset does: with one renormalisation,
+    // At most half a voxel at a time, renormalised twice after each move, as OpenVDB's offset does: with one renormalisation,
     // or moves of 0.7 or 1 voxel, the surface sank further than asked (the spheres' flat layer 0.87-0.89 r above its
-    // top row instead of 0.91; the test allows 0.875).
-    for (float moved = 0; moved < distance;) {
-        const float step = std::min(0.5f * voxel, distance - moved);
+    // top row instead of 0.92; the test allows 0.875).
+    const int moves = int(std::ceil(distance / (0.5f * voxel)));
+    const float step = distance / float(std::max(moves, 1));
+    for (int move = 0; move < moves; ++move) {
         openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid.tree());
         leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
             for (auto it = leaf.beginValueOn(); it; ++it) it.setValue(*it + step);
         });
         renormalise(grid, 2);
-        moved += step;
     }
     openvdb::tools::pruneLevelSet(grid.tree());
 }
