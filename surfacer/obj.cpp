@@ -68,12 +68,12 @@ void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const 
                 if (end == std::string::npos) break;
                 start = end + 1;
             }
-            const auto vector = [&](std::string_view tag, const Vec3& p) {
+            const auto triple = [&](std::string_view tag, const Vec3& p) {
                 out.text(tag), out.number(p.x()), out.text(" "), out.number(p.y()), out.text(" "), out.number(p.z());
                 out.text("\n");
             };
-            for (const auto& p : mesh.points) vector("v ", p);
-            for (const auto& n : mesh.normals) vector("vn ", n);
+            for (const auto& p : mesh.points) triple("v ", p);
+            for (const auto& n : mesh.normals) triple("vn ", n);
             for (float t : mesh.temperature) out.text("vt "), out.number(t), out.text(" 0\n");
             const bool withT = !mesh.temperature.empty();
             for (const auto& t : mesh.triangles) {
@@ -92,6 +92,16 @@ void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const 
 }
 
 namespace {
+
+// Calls f(line) for each line of `text`, without its newline.
+template <class F>
+void eachLine(std::string_view text, F&& f) {
+    for (std::size_t start = 0; start < text.size();) {
+        const std::size_t end = std::min(text.find('\n', start), text.size());
+        f(text.substr(start, end - start));
+        start = end + 1;
+    }
+}
 
 // A line of an OBJ file, read token by token without copies.
 class LineReader {
@@ -162,12 +172,10 @@ SurfaceMesh readObj(const std::filesystem::path& path) {
     // Sized before the parse: the faces alone take 72 bytes each, and growing them copied them over and over.
     {
         std::size_t v = 0, vn = 0, vt = 0, f = 0;
-        for (std::size_t at = 0; at < text.size();) {
-            const std::size_t end = std::min(text.find('\n', at), text.size());
-            if (end - at >= 2 && text[at] == 'f') ++f;
-            if (end - at >= 2 && text[at] == 'v') ++(text[at + 1] == 'n' ? vn : text[at + 1] == 't' ? vt : v);
-            at = end + 1;
-        }
+        eachLine(text, [&](std::string_view line) {
+            if (line.size() >= 2 && line[0] == 'f') ++f;
+            if (line.size() >= 2 && line[0] == 'v') ++(line[1] == 'n' ? vn : line[1] == 't' ? vt : v);
+        });
         mesh.points.reserve(v), normals.reserve(vn), temperatures.reserve(vt), faces.reserve(f);
     }
     std::size_t lineNumber = 0;
@@ -176,13 +184,11 @@ SurfaceMesh readObj(const std::filesystem::path& path) {
                                       "N --force`)",
                                       path.string(), lineNumber, what));
     };
-    for (std::size_t start = 0; start < text.size();) {
-        const std::size_t end = std::min(text.find('\n', start), text.size());
-        LineReader s(text.substr(start, end - start));
-        start = end + 1;
+    eachLine(text, [&](std::string_view line) {
+        LineReader s(line);
         ++lineNumber;
         const std::string_view tag = s.token();
-        if (tag.empty() || tag[0] == '#') continue;
+        if (tag.empty() || tag[0] == '#') return;
         if (tag == "v" || tag == "vn") {
             Vec3 p;
             if (!s.number(p.x()) || !s.number(p.y()) || !s.number(p.z()) || !p.allFinite())
@@ -213,7 +219,7 @@ SurfaceMesh readObj(const std::filesystem::path& path) {
             if (n != 3) throw bad("faces must be triangles");
             faces.push_back(face);
         }
-    }
+    });
     const bool withNormals = !normals.empty(), withT = !temperatures.empty();
     mesh.normals.assign(mesh.points.size(), Vec3::Zero());
     if (withT) mesh.temperature.assign(mesh.points.size(), 0.f);
