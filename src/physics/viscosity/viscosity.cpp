@@ -16,7 +16,7 @@ namespace ganache {
 
 namespace {
 
-constexpr Real kTwoDPlus4 = 10;  // 2 (d + 2) with d = 3
+constexpr Real kTwoDPlus4 = 10;  // 2 (d + 2) with d = 3: the paper's scale
 
 // The change of velocity of the latest pass: the warm start of the next step, and what a later coupled pass of the
 // same step takes back.
@@ -25,6 +25,28 @@ constexpr Attribute<Vec3> kChange{"_viscosity_dv", false};
 constexpr Attribute<Vec3> kEarlierChange{"_viscosity_dv_earlier", false};
 
 }  // namespace
+
+LaplacianWeights::LaplacianWeights(ViscosityParams::Laplacian kind, Real spacing, const CubicSpline& kernel)
+    : m_reshaped(kind == ViscosityParams::Laplacian::Lattice), m_inverseSpacing2(1 / (spacing * spacing)),
+      m_scale(kTwoDPlus4) {
+    if (!m_reshaped) return;
+    // The scale that makes the reshaped sum exact on the lattice the sampler lays out (each particle's volume
+    // 1 / latticeKernelSum, as its mass says): the x component of the Laplacian of v = y^2 / 2 e_x, which is 1, at
+    // a lattice point, with the pairs' weights unscaled.
+    const Real h = kernel.supportRadius(), eps = 0.01 * h * h, volume = 1 / latticeKernelSum(spacing, kernel);
+    const int reach = int(std::ceil(h / spacing));
+    Real sum = 0;
+    for (int i = -reach; i <= reach; ++i)
+        for (int j = -reach; j <= reach; ++j)
+            for (int k = -reach; k <= reach; ++k) {
+                const Vec3 xij = -spacing * Vec3(i, j, k);  // x_i at the origin
+                const Real d2 = xij.squaredNorm();
+                if (d2 == 0 || d2 >= h * h) continue;
+                const Real vij = -0.5 * xij.y() * xij.y();  // (v_i - v_j) . e_x
+                sum += volume * shape(d2) * vij * xij.x() / (d2 + eps) * kernel.gradW(xij).x();
+            }
+    m_scale = 1 / sum;
+}
 
 Real fieldDot(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
     return deterministicSum(a.size(), [&](std::size_t i) { return a[i].dot(b[i]); });
@@ -119,7 +141,9 @@ void ParticleViscosity::refresh(const ParticleSet& particles) {
 }
 
 ViscosityMethod::ViscosityMethod(const ViscosityParams& params, const SimulationSetup& setup, ParticleSet& particles)
-    : m_params(params), m_mu(params, setup, particles), m_dv(&particles.add(kChange)),
+    : m_params(params), m_mu(params, setup, particles),
+      m_weights(params.laplacian, 2 * setup.particleRadius, CubicSpline(supportRadiusFor(setup.particleRadius))),
+      m_dv(&particles.add(kChange)),
       m_earlierDv(&particles.add(kEarlierChange)) {}
 
 std::vector<Counter> ViscosityMethod::counters(std::size_t) const {
@@ -148,10 +172,11 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
     m_fluidBlocks.resize(particles.size());
     const Real* rho = ctx.density.data();
     const Real* g = ctx.gradients.fluid.data();
+    const Real scale = m_weights.scale();
     forEachParticle(particles.size(), [&](std::size_t i) {
         // 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)) g_ij, mu and m averaged over the pair so that the
-        // operator is symmetric [Eq. 9], to the last bit (k_ji rounds as k_ij does); the diagonal block sums
-        // k_ij x_ij x_ij^T (six distinct entries)
+        // operator is symmetric [Eq. 9], to the last bit (k_ji rounds as k_ij does), with LaplacianWeights' scale
+        // for 2(d+2) and its shape; the diagonal block sums k_ij x_ij x_ij^T (six distinct entries)
         const Real mui = m_mu(i), mi = m[i];
         const bool varies = m_mu.varies();
         Real b00 = 0, b01 = 0, b02 = 0, b11 = 0, b12 = 0, b22 = 0;
@@ -159,20 +184,23 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
             const std::uint32_t j = f.indices[p];
             const Vec3 xij = x[i] - x[j];
             const Real muj = varies ? m_mu(j) : mui;
-            const Real k =
-                kTwoDPlus4 * 0.25 * (mui + muj) * (mi + m[j]) * g[p] / (rho[i] * rho[j] * (xij.squaredNorm() + eps));
+            const Real d2 = xij.squaredNorm();
+            const Real k = scale * 0.25 * (mui + muj) * (mi + m[j]) * g[p] * m_weights.shape(d2) /
+                           (rho[i] * rho[j] * (d2 + eps));
             m_pairs[p] = k;
             b00 += k * xij.x() * xij.x(), b01 += k * xij.x() * xij.y(), b02 += k * xij.x() * xij.z();
             b11 += k * xij.y() * xij.y(), b12 += k * xij.y() * xij.z(), b22 += k * xij.z() * xij.z();
         }
         m_fluidBlocks[i] << b00, b01, b02, b01, b11, b12, b02, b12, b22;
-        // 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) g_ik [Eq. 11-12]
+        // 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) g_ik [Eq. 11-12], weighted as the fluid's pairs: the
+        // wall's particles stand in for fluid moving with it
         if (sticky()) {
-            const Real cb = kTwoDPlus4 * m_params.boundaryMu * ctx.restDensity[i] / (rho[i] * rho[i]);
+            const Real cb = scale * m_params.boundaryMu * ctx.restDensity[i] / (rho[i] * rho[i]);
             for (std::size_t p = b.first(i); p < b.last(i); ++p) {
                 const std::uint32_t k = b.indices[p];
-                m_boundaryPairs[p] = cb * ctx.boundary.volume[k] * ctx.gradients.boundary[p] /
-                                     ((x[i] - ctx.boundary.x[k]).squaredNorm() + eps);
+                const Real d2 = (x[i] - ctx.boundary.x[k]).squaredNorm();
+                m_boundaryPairs[p] = cb * ctx.boundary.volume[k] * ctx.gradients.boundary[p] * m_weights.shape(d2) /
+                                     (d2 + eps);
             }
         }
     });
@@ -305,6 +333,8 @@ std::shared_ptr<const EffectParams> readViscosity(Section& s) {
                                                                                      : Method::Weiler2018;
     if (s.has("mu")) p->mu = s.number("mu", std::nullopt, "Pa s", Bounds::closed(0, limits::kViscosity));
     p->boundaryMu = s.number("boundary_mu", p->boundaryMu, "Pa s", Bounds::closed(0, limits::kViscosity));
+    p->laplacian = s.choice("laplacian", "lattice", {"lattice", "paper"}) == "paper" ? ViscosityParams::Laplacian::Paper
+                                                                                    : ViscosityParams::Laplacian::Lattice;
     if (p->method == Method::Explicit) {
         // Forward Euler has no solve: its only setting is how many sub-steps one step may take.
         for (const char* key : {"tolerance", "stiff_tolerance", "preconditioner", "warm_start"})

@@ -11,7 +11,6 @@ namespace ganache {
 
 namespace {
 
-constexpr Real kTwoDPlus4 = 10;  // 2 (d + 2) with d = 3
 // The coarse space's clusters: cells of two kernel supports (about 4^3 = 64 particles at support 4 r, spacing 2 r),
 // larger where that would make more than 6 n^0.4 clusters. Factoring the coarse system grows faster than the fine
 // products (measured: 2 ms for 120 clusters, 200 ms for 750), so the cap keeps it to a few CG iterations' worth:
@@ -33,7 +32,8 @@ constexpr Real kStiff = 3000;
 
 }  // namespace
 
-std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vector<Real>& density,
+std::vector<Vec3> viscousLaplacian(const LaplacianWeights& weights, const ParticleSet& particles,
+                                   const std::vector<Real>& density,
                                    const NeighbourList& neighbours, const CubicSpline& kernel) {
     const auto& x = particles.x();
     const auto& v = particles.v();
@@ -43,9 +43,10 @@ std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vect
     forEachParticle(particles.size(), [&](std::size_t i) {
         for (std::uint32_t j : neighbours.of(i)) {
             const Vec3 xij = x[i] - x[j];
-            lap[i] += (m[j] / density[j]) * (v[i] - v[j]).dot(xij) / (xij.squaredNorm() + eps) * kernel.gradW(xij);
+            const Real d2 = xij.squaredNorm();
+            lap[i] += (m[j] / density[j]) * weights.shape(d2) * (v[i] - v[j]).dot(xij) / (d2 + eps) * kernel.gradW(xij);
         }
-        lap[i] *= kTwoDPlus4;
+        lap[i] *= weights.scale();
     });
     return lap;
 }

@@ -8,8 +8,10 @@
 namespace ganache {
 
 /// The viscous Laplacian of Eq. 7 for every fluid particle (fluid neighbours only) [1/s]:
-/// lap v_i = 2(d+2) sum_j (m_j / rho_j) (v_ij . x_ij) / (|x_ij|^2 + 0.01 h^2) grad W_ij.
-std::vector<Vec3> viscousLaplacian(const ParticleSet& particles, const std::vector<Real>& density,
+/// lap v_i = 2(d+2) sum_j (m_j / rho_j) (v_ij . x_ij) / (|x_ij|^2 + 0.01 h^2) grad W_ij, with the weights' scale for
+/// 2(d+2) and their shape on each pair.
+std::vector<Vec3> viscousLaplacian(const LaplacianWeights& weights, const ParticleSet& particles,
+                                   const std::vector<Real>& density,
                                    const NeighbourList& neighbours, const CubicSpline& kernel);
 
 /// Solves (I - dt A) v = b for the velocities after the divergence-free solve [WKBB18 Eq. 8-12] with
