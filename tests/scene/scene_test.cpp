@@ -1,6 +1,7 @@
 #include "scene/scene.h"
 
 #include "physics/gravity.h"
+#include "physics/viscosity/viscosity.h"
 
 #include "../physics/drag_effect.h"
 
@@ -114,6 +115,16 @@ TEST(Scene, ReadsEveryPartOfTheTinyScene) {
     const EffectSpec* g = s.findEffect("gravity");
     ASSERT_NE(g, nullptr);
     EXPECT_EQ(dynamic_cast<const GravityParams&>(*g->params).acceleration, Vec3(0, -9.81, 0));
+}
+
+TEST(Scene, ViscosityTakesTheLatticeWeightsUnlessThePapersAreAskedFor) {
+    auto laplacian = [](const std::string& name, const std::string& viscosity) {
+        const Scene s = loadScene(writeTemp(name, std::string(kMinimal) + "effects: {viscosity: " + viscosity + "}\n"),
+                                  Quality::parse("final"));
+        return static_cast<const ViscosityParams&>(*s.findEffect("viscosity")->params).laplacian;
+    };
+    EXPECT_EQ(laplacian("lattice.yaml", "{}"), ViscosityParams::Laplacian::Lattice);
+    EXPECT_EQ(laplacian("paper.yaml", "{laplacian: paper}"), ViscosityParams::Laplacian::Paper);
 }
 
 TEST(Scene, ExplainedSceneLoadsBackToTheSameEffectiveScene) {
