@@ -54,6 +54,16 @@ private:
     std::string m_buffer;
 };
 
+// Calls f(line) for each line of `text`, without its newline.
+template <class F>
+void eachLine(std::string_view text, F&& f) {
+    for (std::size_t start = 0; start < text.size();) {
+        const std::size_t end = std::min(text.find('\n', start), text.size());
+        f(text.substr(start, end - start));
+        start = end + 1;
+    }
+}
+
 }  // namespace
 
 void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const std::string& header) {
@@ -61,13 +71,7 @@ void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const 
         std::ofstream file(tmp, std::ios::binary);
         {
             ObjWriter out(file);
-            std::size_t start = 0;
-            while (start < header.size()) {
-                const std::size_t end = header.find('\n', start);
-                out.text("# "), out.text(std::string_view(header).substr(start, end - start)), out.text("\n");
-                if (end == std::string::npos) break;
-                start = end + 1;
-            }
+            eachLine(header, [&](std::string_view line) { out.text("# "), out.text(line), out.text("\n"); });
             const auto triple = [&](std::string_view tag, const Vec3& p) {
                 out.text(tag), out.number(p.x()), out.text(" "), out.number(p.y()), out.text(" "), out.number(p.z());
                 out.text("\n");
@@ -92,16 +96,6 @@ void writeObj(const std::filesystem::path& path, const SurfaceMesh& mesh, const 
 }
 
 namespace {
-
-// Calls f(line) for each line of `text`, without its newline.
-template <class F>
-void eachLine(std::string_view text, F&& f) {
-    for (std::size_t start = 0; start < text.size();) {
-        const std::size_t end = std::min(text.find('\n', start), text.size());
-        f(text.substr(start, end - start));
-        start = end + 1;
-    }
-}
 
 // A line of an OBJ file, read token by token without copies.
 class LineReader {
