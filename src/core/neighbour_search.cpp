@@ -46,7 +46,8 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     if (n >= std::size_t(UINT32_MAX)) throw std::runtime_error("neighbour search: more than 4 billion points");
     const Real inv = 1 / m_cellSize;
 
-    std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed(n);
+    auto& keyed = m_keyed;
+    keyed.resize(n);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
             const Vec3 c = (x[i] * inv).array().floor();
@@ -157,8 +158,12 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     constexpr std::size_t kCellsPerChunk = 64;
     const std::size_t cells = queryGrid.cellCount();
     const std::size_t chunks = (cells + kCellsPerChunk - 1) / kCellsPerChunk;
-    std::vector<std::vector<std::uint32_t>> buffers(chunks);
-    std::vector<std::uint32_t> count(n), chunkOf(n), localStart(n);
+    auto& buffers = out.scratch.chunks;
+    if (buffers.size() < chunks) buffers.resize(chunks);
+    auto& count = out.scratch.count;
+    auto& chunkOf = out.scratch.chunkOf;
+    auto& localStart = out.scratch.localStart;
+    count.resize(n), chunkOf.resize(n), localStart.resize(n);
     const Real* tx = targetGrid.sortedCoords(0).data();
     const Real* ty = targetGrid.sortedCoords(1).data();
     const Real* tz = targetGrid.sortedCoords(2).data();
@@ -166,7 +171,7 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const auto& range) {
         Candidates& cand = scratch.local();
         for (std::size_t chunk = range.begin(); chunk != range.end(); ++chunk) {
-            auto& buffer = buffers[chunk];
+            auto& buffer = buffers[chunk];  // never shrunk: its size is room, the lists fill it from the start
             std::size_t used = 0;
             const std::size_t lastCell = std::min(cells, (chunk + 1) * kCellsPerChunk);
             for (std::size_t c = chunk * kCellsPerChunk; c < lastCell; ++c) {
@@ -224,7 +229,6 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
                     used += found;
                 }
             }
-            buffer.resize(used);
         }
     });
 
