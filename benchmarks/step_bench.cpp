@@ -2,9 +2,9 @@
 // (mu = 1e4 Pa s) hitting a floor at 1 m/s, fixed dt = 0.5 ms, about 56k and 200k particles on 1 and 2 threads and
 // 1M on 2.
 // Reported per step: neighbours (search, densities, DFSPH factors), pressure (both DFSPH solves), viscosity,
-// CG iterations per solve, constant-density and divergence-free iterations per step, total; and resident memory per particle. A heat variant gives the heat effect's share,
-// a block-Jacobi variant the saving of the coarse space (at this viscosity no particle is stiff enough for the
-// clusters, so the default uses the fluid-wide rigid motions).
+// CG iterations per solve, constant-density and divergence-free iterations per step, total; and resident memory per
+// particle. A heat variant gives the heat effect's share, a block-Jacobi variant the saving of the coarse space (at
+// this viscosity no particle is stiff enough for the clusters, so the default uses the fluid-wide rigid motions).
 // Run: build/benchmarks/step_bench --benchmark_counters_tabular=true
 
 #include "physics/simulation.h"
