@@ -18,8 +18,9 @@ namespace {
 
 constexpr char kMagic[8] = {'G', 'N', 'C', 'H', 'C', 'K', 'P', 'T'};
 // 2: effects save their own state; 3: the viscosity warm start's steps; 4: steps past the CFL limit; 5: which
-// particles the viscosity moves as one body (attribute::kViscouslyRigid)
-constexpr std::uint32_t kVersion = 5;
+// particles the viscosity moves as one body (attribute::kViscouslyRigid); 6: the latest constant-density solve's
+// iterations (they set the next divergence-free solve's minimum)
+constexpr std::uint32_t kVersion = 6;
 
 // Writing and reading share one description of the state (fields() below): the same calls on a ByteWriter append
 // each value, on a ByteReader take it back, so the two can never disagree on the order.
@@ -70,9 +71,9 @@ void fields(Reader& io, ParticleSet& p) {
 
 template <class IO, class Stats>
 void statsFields(IO& io, Stats& s) {
-    io(s.steps), io(s.pressureIterations), io(s.pressureCapHits), io(s.divergenceIterations),
-        io(s.divergenceCapHits), io(s.removedParticles), io(s.addedParticles), io(s.boundaryContacts),
-        io(s.stepsPastCfl), io(s.cflExcess), io(s.dtMin), io(s.dtMax);
+    io(s.steps), io(s.pressureIterations), io(s.pressureCapHits), io(s.lastPressureIterations),
+        io(s.divergenceIterations), io(s.divergenceCapHits), io(s.removedParticles), io(s.addedParticles),
+        io(s.boundaryContacts), io(s.stepsPastCfl), io(s.cflExcess), io(s.dtMin), io(s.dtMax);
     auto& t = s.time;
     io(t.pressure), io(t.advect), io(t.neighbours), io(t.divergence);
     io(s.warnings), io(s.warningCount);

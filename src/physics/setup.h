@@ -34,13 +34,15 @@ struct PressureSettings {
     /// iteration and could stop at 0, but with both solves free to, a honey column at rest crept at 1.0 cm/s instead of
     /// 0.3 and the bunny's spread moved 5.3 % between 5 and 0.05 ms steps (tests).
     std::int64_t minIterations = 2;
-    /// Fewest iterations of the divergence-free solve. DFSPH's 1 saves 1.7 of 2.7 iterations a step on the anchors'
-    /// scenes (0.72 / 0.84 / 0.68 of SPlisHSPlasH's time -> 0.65 / 0.76 / 0.60, 1 thread), but the 1M-particle impact
-    /// of step_bench then takes 84 pressure iterations a step instead of 27 (19.0 s a step instead of 7.6, 2 threads):
-    /// the mean residual is met at once where the impact is a small part of the fluid, and the constant-density solve
-    /// inherits the rest. On the buckling anchor it also leaves the spread 1.2 % off its converged shape instead of
-    /// 0.5 (with the paper's viscosity weights 3.5 against 1.2). 2 stays the default.
-    std::int64_t minDivergenceIterations = 2;
+    /// Fewest iterations of the divergence-free solve: DFSPH's 1, which is all the anchors' blocks need on most steps
+    /// (2 always cost block8k 1.7 more iterations a step). Raised to 2 for the step after a constant-density solve of
+    /// more than impactIterations: with 1 throughout, the 1M-particle impact of step_bench took 83 constant-density
+    /// iterations a step instead of 25 (its divergence-free solve meets the mean residual in one iteration while the
+    /// impact is a small part of the fluid, and the constant-density solve inherits what that left), and the buckling
+    /// anchor's landing sheet ended 1.43 % compressed at its densest instead of 0.47. Calm steps take 2-4
+    /// constant-density iterations, landings 5-100; at 6 the buckling sheet ends at 0.40 %, at 12 at 1.43 %.
+    std::int64_t minDivergenceIterations = 1;
+    std::int64_t impactIterations = 6;
     /// The share of its compression that the constant-density solve removes in one step from a particle the viscosity
     /// moves as one body (attribute::kViscouslyRigid); 1 removes it all, as DFSPH does everywhere. A landing stiff body
     /// ends its step compressed where the linearised solve did not foresee it (its contact layer moves most of a

@@ -36,6 +36,7 @@ struct StageTimes {
 struct SolverStats {
     std::size_t steps = 0;
     std::size_t pressureIterations = 0, pressureCapHits = 0;
+    std::size_t lastPressureIterations = 0;  ///< of the latest constant-density solve (see impactIterations)
     std::size_t divergenceIterations = 0, divergenceCapHits = 0;
     std::size_t removedParticles = 0;  ///< left the domain
     std::size_t addedParticles = 0;    ///< added during the run (emitters)

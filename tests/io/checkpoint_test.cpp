@@ -28,6 +28,7 @@ SimulationState sampleState() {
     s.peakForce = {9.5};
     s.stats.steps = 4242;
     s.stats.boundaryContacts = 31;
+    s.stats.lastPressureIterations = 17;
     s.stats.dtMin = 1e-4;
     s.stats.time.divergence = 12.5;
     s.stats.warn("step 1: something");
@@ -71,6 +72,7 @@ TEST(Checkpoint, EveryFieldComesBackExactly) {
     EXPECT_EQ(c.state.peakForce, s.peakForce);
     EXPECT_EQ(c.state.stats.steps, 4242u);
     EXPECT_EQ(c.state.stats.boundaryContacts, 31u);
+    EXPECT_EQ(c.state.stats.lastPressureIterations, 17u);
     EXPECT_EQ(c.state.stats.dtMin, 1e-4);
     EXPECT_EQ(c.state.stats.time.divergence, 12.5);
     EXPECT_EQ(c.state.stats.warnings, s.stats.warnings);

@@ -129,9 +129,12 @@ void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Rea
 bool PressureDFSPH::finished(StepContext& ctx, Solve which, std::size_t iteration, Real error) const {
     const bool density = which == Solve::Density;
     const Real tolerance = density ? m_settings.densityError : m_settings.divergenceError;
-    const auto fewest = std::size_t(density ? m_settings.minIterations : m_settings.minDivergenceIterations);
+    // After an impact's constant-density solve the divergence-free solve takes at least two (impactIterations).
+    const bool impact = ctx.stats.lastPressureIterations > std::size_t(m_settings.impactIterations);
+    const std::int64_t fewest = density ? m_settings.minIterations
+                                        : std::max<std::int64_t>(m_settings.minDivergenceIterations, impact ? 2 : 0);
     const bool converged = error <= tolerance;
-    if (converged && iteration >= fewest) return true;
+    if (converged && iteration >= std::size_t(fewest)) return true;
     if (iteration < std::size_t(m_settings.maxIterations)) return false;
     if (!converged) {
         ++(density ? ctx.stats.pressureCapHits : ctx.stats.divergenceCapHits);
@@ -348,11 +351,13 @@ void PressureDFSPH::solveDensity(StepContext& ctx, ParticleSet& particles) {
     // share PressureSettings::rigidCorrection.
     const std::vector<Real>* rigid = particles.find(attribute::kViscouslyRigid);
     const Real share = m_settings.rigidCorrection;
-    ctx.stats.pressureIterations += solve(Solve::Density, ctx, particles, *m_pressure, [&](std::size_t i, Real rate) {
+    const std::size_t iterations = solve(Solve::Density, ctx, particles, *m_pressure, [&](std::size_t i, Real rate) {
         const Real excess = ctx.density[i] - ctx.restDensity[i];
         if (excess > 0 && rigid && (*rigid)[i] != 0) return share * excess + dt * rate;
         return ctx.density[i] + dt * rate - ctx.restDensity[i];  // summed in this order, runny fluids' bytes stay
     });
+    ctx.stats.pressureIterations += iterations;
+    ctx.stats.lastPressureIterations = iterations;
 }
 
 void PressureDFSPH::solveDivergence(StepContext& ctx, ParticleSet& particles) {
