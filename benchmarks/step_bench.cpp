@@ -92,7 +92,8 @@ void step(benchmark::State& state) {
     state.counters["cg_iterations"] =
         (after["cg_iterations"] - before["cg_iterations"]) / (after["cg_solves"] - before["cg_solves"]);
     state.counters["pressure_iterations"] = (after["pressure_iterations"] - before["pressure_iterations"]) / steps;
-    state.counters["divergence_iterations"] = (after["divergence_iterations"] - before["divergence_iterations"]) / steps;
+    state.counters["divergence_iterations"] =
+        (after["divergence_iterations"] - before["divergence_iterations"]) / steps;
     state.counters["bytes_per_particle"] = double(residentBytes() - resident) / double(sim.particles().size());
 }
 

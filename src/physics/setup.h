@@ -42,7 +42,7 @@ struct PressureSettings {
     /// anchor's landing sheet ended 1.43 % compressed at its densest instead of 0.47. Calm steps take 2-4
     /// constant-density iterations, landings 5-100; at 6 the buckling sheet ends at 0.40 %, at 12 at 1.43 %.
     std::int64_t minDivergenceIterations = 1;
-    std::int64_t impactIterations = 6;
+    std::int64_t impactIterations = 6;  ///< constant-density iterations past which a step counts as an impact
     /// The share of its compression that the constant-density solve removes in one step from a particle the viscosity
     /// moves as one body (attribute::kViscouslyRigid); 1 removes it all, as DFSPH does everywhere. A landing stiff body
     /// ends its step compressed where the linearised solve did not foresee it (its contact layer moves most of a
