@@ -415,8 +415,8 @@ TEST(Cli, QuickStudyWritesItsTableChartsAndReport) {
         const std::size_t third = line.find(',', line.find(',', line.find(',') + 1) + 1);
         rows[line.substr(0, third)] = line;
     }
-    // Three cases x nine knobs x two settings, and the bunny's reference run.
-    EXPECT_EQ(rows.size(), 3u * 9u * 2u + 1u);
+    // Three cases x ten knobs x two settings, and the bunny's reference run.
+    EXPECT_EQ(rows.size(), 3u * 10u * 2u + 1u);
     for (const char* c : {"spinning_cube", "couette", "viscous_bunny"}) {
         EXPECT_TRUE(rows.count(std::string(c) + ",viscosity_method,weiler2018")) << c;
         const ganache::Image chart = ganache::readPng(out / (std::string(c) + ".png"));

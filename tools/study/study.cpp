@@ -127,6 +127,16 @@ std::vector<Knob> knobs(bool quick) {
     solver.points = {solverPoint("jacobi", false, PressureSettings::Solver::Jacobi),
                      solverPoint("mprgp", true, PressureSettings::Solver::Mprgp)};
     all.push_back(solver);
+    Knob divergence{"divergence_minimum",
+                    "simulation.pressure.min_divergence_iterations: fewest divergence-free iterations a step (two "
+                    "after an impact whatever this says, impact_iterations)",
+                    {}};
+    auto divergencePoint = [](std::int64_t fewest, bool isDefault) {
+        return Point{fmt::format("{}", fewest), isDefault, 1,
+                     [fewest](SimulationSetup& s) { s.pressure.minDivergenceIterations = fewest; }};
+    };
+    divergence.points = {divergencePoint(2, false), divergencePoint(1, true)};
+    all.push_back(divergence);
     if (quick)  // the cheapest setting and the default: every knob, chart and sentence of the report is exercised
         for (Knob& k : all) {
             const Point cheapest = k.points.front();
