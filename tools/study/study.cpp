@@ -131,11 +131,11 @@ std::vector<Knob> knobs(bool quick) {
                     "simulation.pressure.min_divergence_iterations: fewest divergence-free iterations a step (two "
                     "after an impact whatever this says, impact_iterations)",
                     {}};
-    auto divergencePoint = [](std::int64_t fewest, bool isDefault) {
-        return Point{fmt::format("{}", fewest), isDefault, 1,
+    auto divergencePoint = [](std::int64_t fewest) {
+        return Point{fmt::format("{}", fewest), fewest == PressureSettings{}.minDivergenceIterations, 1,
                      [fewest](SimulationSetup& s) { s.pressure.minDivergenceIterations = fewest; }};
     };
-    divergence.points = {divergencePoint(2, false), divergencePoint(1, true)};
+    divergence.points = {divergencePoint(2), divergencePoint(1)};
     all.push_back(divergence);
     if (quick)  // the cheapest setting and the default: every knob, chart and sentence of the report is exercised
         for (Knob& k : all) {
