@@ -71,7 +71,7 @@ void viscous(benchmark::State& state) {
     std::vector<Vec3> out(b.x.size());
     for (auto _ : state) {
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
-            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, {}, b.x.data(), nullptr, b.v.data(), 1e-3,
+            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.x.data(), b.v.data(), 1e-3,
                                    out.data());
         });
         benchmark::DoNotOptimize(out.data());
@@ -86,11 +86,11 @@ void pressure(benchmark::State& state) {
     std::vector<Vec3> dv(b.x.size());
     for (auto _ : state) {
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
-            sweeps::pressureChange(begin, end, {&b.pairs, b.weight.data()}, {}, b.x.data(), nullptr, s.data(), 1e-3,
+            sweeps::pressureChange(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.x.data(), s.data(), 1e-3,
                                    dv.data());
         });
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
-            sweeps::densityRate(begin, end, {&b.pairs, b.weight.data()}, {}, b.x.data(), nullptr, dv.data(), nullptr,
+            sweeps::densityRate(begin, end, {&b.pairs, b.weight.data()}, nullptr, nullptr, b.x.data(), dv.data(),
                                 rate.data());
         });
         benchmark::DoNotOptimize(rate.data());

@@ -15,8 +15,8 @@ namespace {
 
 // The viscous product for N inputs in one pass over the pairs (the pairs' geometry is read once for all of them).
 template <int N>
-void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* xv,
-                       const Vec3* xbv, const Vec3* const (&inv)[N], Real dt, Vec3* const (&out)[N]) {
+void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* xv,
+                       const Vec3* const (&inv)[N], Real dt, Vec3* const (&out)[N]) {
     const Real* x = raw(xv);
     const Real* v[N];
     for (int c = 0; c < N; ++c) v[c] = raw(inv[c]);
@@ -38,45 +38,32 @@ void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, Pairs bo
                 a[c][2] += s * d2;
             }
         }
-        if (boundary.weight) {
-            const Real* xb = raw(xbv);
-            const std::uint64_t* boff = boundary.list->offsets.data();
-            const std::uint32_t* bidx = boundary.list->indices.data();
-            for (std::uint64_t q = boff[i]; q < boff[i + 1]; ++q) {
-                const std::size_t k3 = 3 * std::size_t(bidx[q]);
-                const Real d0 = xi0 - xb[k3], d1 = xi1 - xb[k3 + 1], d2 = xi2 - xb[k3 + 2];
-                for (int c = 0; c < N; ++c) {
-                    const Real* u = v[c];
-                    const Real s = boundary.weight[q] * (d0 * u[3 * i] + d1 * u[3 * i + 1] + d2 * u[3 * i + 2]);
-                    a[c][0] += s * d0;
-                    a[c][1] += s * d1;
-                    a[c][2] += s * d2;
-                }
-            }
+        for (int c = 0; c < N; ++c) {
+            Vec3 o(v[c][3 * i] - dt * a[c][0], v[c][3 * i + 1] - dt * a[c][1], v[c][3 * i + 2] - dt * a[c][2]);
+            if (boundaryBlock) o += boundaryBlock[i] * inv[c][i];
+            out[c][i] = o;
         }
-        for (int c = 0; c < N; ++c)
-            out[c][i] = Vec3(v[c][3 * i] - dt * a[c][0], v[c][3 * i + 1] - dt * a[c][1], v[c][3 * i + 2] - dt * a[c][2]);
     }
 }
 
 }  // namespace
 
-void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* x,
                     const Vec3* in, Real dt, Vec3* out) {
     const Vec3* const inputs[1] = {in};
     Vec3* const outputs[1] = {out};
-    viscousProductsOf<1>(begin, end, fluid, boundary, x, xb, inputs, dt, outputs);
+    viscousProductsOf<1>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
 }
 
-void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* x,
                      const Vec3* in1, const Vec3* in2, Real dt, Vec3* out1, Vec3* out2) {
     const Vec3* const inputs[2] = {in1, in2};
     Vec3* const outputs[2] = {out1, out2};
-    viscousProductsOf<2>(begin, end, fluid, boundary, x, xb, inputs, dt, outputs);
+    viscousProductsOf<2>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
 }
 
-void densityRate(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* xv, const Vec3* xbv,
-                 const Vec3* uv, const Vec3* ubv, Real* rate) {
+void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Real* bodyRate,
+                 const Vec3* xv, const Vec3* uv, Real* rate) {
     const Real* x = raw(xv);
     const Real* u = raw(uv);
     const std::uint64_t* off = fluid.list->offsets.data();
@@ -91,23 +78,13 @@ void densityRate(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary
             r += w[p] * ((ui0 - u[j]) * (xi0 - x[j]) + (ui1 - u[j + 1]) * (xi1 - x[j + 1]) +
                          (ui2 - u[j + 2]) * (xi2 - x[j + 2]));
         }
-        if (boundary.weight) {
-            const Real* xb = raw(xbv);
-            const Real* ub = ubv ? raw(ubv) : nullptr;
-            const std::uint64_t* boff = boundary.list->offsets.data();
-            const std::uint32_t* bidx = boundary.list->indices.data();
-            for (std::uint64_t q = boff[i]; q < boff[i + 1]; ++q) {
-                const std::size_t k3 = 3 * std::size_t(bidx[q]);
-                const Real b0 = ub ? ub[k3] : 0, b1 = ub ? ub[k3 + 1] : 0, b2 = ub ? ub[k3 + 2] : 0;
-                r += boundary.weight[q] *
-                     ((ui0 - b0) * (xi0 - xb[k3]) + (ui1 - b1) * (xi1 - xb[k3 + 1]) + (ui2 - b2) * (xi2 - xb[k3 + 2]));
-            }
-        }
+        if (boundarySum) r += ui0 * boundarySum[i].x() + ui1 * boundarySum[i].y() + ui2 * boundarySum[i].z();
+        if (bodyRate) r -= bodyRate[i];
         rate[i] = r;
     }
 }
 
-void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* xv, const Vec3* xbv,
+void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Vec3* xv,
                     const Real* s, Real dt, Vec3* dv) {
     const Real* x = raw(xv);
     const std::uint64_t* off = fluid.list->offsets.data();
@@ -124,20 +101,10 @@ void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, Pairs bound
             a1 += c * (xi1 - x[3 * std::size_t(j) + 1]);
             a2 += c * (xi2 - x[3 * std::size_t(j) + 2]);
         }
-        if (boundary.weight && si != 0) {
-            const Real* xb = raw(xbv);
-            const std::uint64_t* boff = boundary.list->offsets.data();
-            const std::uint32_t* bidx = boundary.list->indices.data();
-            Real b0 = 0, b1 = 0, b2 = 0;
-            for (std::uint64_t q = boff[i]; q < boff[i + 1]; ++q) {
-                const std::size_t k3 = 3 * std::size_t(bidx[q]);
-                b0 += boundary.weight[q] * (xi0 - xb[k3]);
-                b1 += boundary.weight[q] * (xi1 - xb[k3 + 1]);
-                b2 += boundary.weight[q] * (xi2 - xb[k3 + 2]);
-            }
-            a0 += si * b0;
-            a1 += si * b1;
-            a2 += si * b2;
+        if (boundarySum) {
+            a0 += si * boundarySum[i].x();
+            a1 += si * boundarySum[i].y();
+            a2 += si * boundarySum[i].z();
         }
         dv[i] = Vec3(-dt * a0, -dt * a1, -dt * a2);
     }

@@ -2,7 +2,8 @@
 // The sweeps over neighbour pairs that every solver iteration makes, as tight scalar loops over plain arrays
 // (pair_sweeps.cpp is compiled with reassociation allowed and without SIMD; see src/CMakeLists.txt). Each pair's
 // geometry is computed once per step: the solvers pass per-pair weights in the order of the neighbour lists, and the
-// sweeps only combine them with the current vectors. A particle's sum is always taken in the same order, so results
+// sweeps only combine them with the current vectors. The boundary stands still during a solve and its particles carry
+// no unknowns, so it enters as one sum per fluid particle, taken once a step, instead of its pairs. A particle's sum is always taken in the same order, so results
 // do not depend on the thread count.
 
 #include "core/neighbour_search.h"
@@ -18,23 +19,26 @@ struct Pairs {
     const Real* weight = nullptr;
 };
 
-/// For i in [begin, end): out_i = in_i - dt (sum_p k_p (x_ij . (in_i - in_j)) x_ij + sum_q kb_q (x_ik . in_i) x_ik),
-/// the product (I - dt A) in of the implicit viscosity [WKBB18 Eq. 7-11] with the bodies' velocities left out.
-void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+/// For i in [begin, end): out_i = in_i - dt sum_p k_p (x_ij . (in_i - in_j)) x_ij + B_i in_i, the product
+/// (I - dt A) in of the implicit viscosity [WKBB18 Eq. 7-11] with the bodies' velocities left out. B_i =
+/// -dt sum_q kb_q x_ik x_ik^T is the boundary's part of particle i's diagonal block, summed once a step: the boundary
+/// stands still during a solve (boundaryBlock null: no boundary).
+void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* x,
                     const Vec3* in, Real dt, Vec3* out);
 
 /// viscousProduct for two inputs at once (one pass over the pairs): out1 = (I - dt A) in1, out2 = (I - dt A) in2.
-void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* x,
                      const Vec3* in1, const Vec3* in2, Real dt, Vec3* out1, Vec3* out2);
 
-/// For i in [begin, end): rate_i = sum_p w_p (u_i - u_j) . x_ij + sum_q wb_q (u_i - ub_k) . x_ik, a density rate
-/// Drho/Dt with w_p = m_j g_p and wb_q the boundary's weight; ub (the bodies' velocities) may be null for zero.
-void densityRate(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
-                 const Vec3* u, const Vec3* ub, Real* rate);
+/// For i in [begin, end): rate_i = sum_p w_p (u_i - u_j) . x_ij + u_i . S_i - c_i, a density rate Drho/Dt with
+/// w_p = m_j g_p, S_i = sum_q wb_q x_ik the boundary's weights summed once a step and c_i = sum_q wb_q ub_k . x_ik the
+/// bodies' velocities' share (boundarySum, bodyRate null: none).
+void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Real* bodyRate,
+                 const Vec3* x, const Vec3* u, Real* rate);
 
-/// For i in [begin, end): dv_i = -dt (sum_p w_p (s_i + s_j) x_ij + s_i sum_q wb_q x_ik), the velocity change of
-/// the pressures s [BK17].
-void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, Pairs boundary, const Vec3* x, const Vec3* xb,
+/// For i in [begin, end): dv_i = -dt (sum_p w_p (s_i + s_j) x_ij + s_i S_i), the velocity change of the pressures s
+/// [BK17], S_i as for densityRate.
+void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Vec3* x,
                     const Real* s, Real dt, Vec3* dv);
 
 }  // namespace ganache::sweeps

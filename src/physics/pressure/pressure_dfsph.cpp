@@ -42,9 +42,8 @@ void PressureDFSPH::rates(const StepContext& ctx, const ParticleSet& particles, 
                           bool withBodies, std::vector<Real>& out) const {
     out.resize(particles.size());
     forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
-        sweeps::densityRate(begin, end, {&ctx.fluidNeighbours, m_weights.data()},
-                            {&ctx.boundaryNeighbours, m_boundaryWeights.data()}, particles.x().data(),
-                            ctx.boundary.x.data(), u.data(), withBodies ? ctx.boundary.v.data() : nullptr, out.data());
+        sweeps::densityRate(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
+                            withBodies ? m_bodyRate.data() : nullptr, particles.x().data(), u.data(), out.data());
     });
 }
 
@@ -52,9 +51,8 @@ void PressureDFSPH::velocityChanges(const StepContext& ctx, const ParticleSet& p
                                     std::vector<Vec3>& out) const {
     out.resize(particles.size());
     forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
-        sweeps::pressureChange(begin, end, {&ctx.fluidNeighbours, m_weights.data()},
-                               {&ctx.boundaryNeighbours, m_boundaryWeights.data()}, particles.x().data(),
-                               ctx.boundary.x.data(), s.data(), ctx.dt, out.data());
+        sweeps::pressureChange(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
+                               particles.x().data(), s.data(), ctx.dt, out.data());
     });
 }
 
@@ -68,6 +66,8 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     const Real h4 = std::pow(ctx.kernel.supportRadius(), 4);
     m_weights.resize(f.pairs());
     m_boundaryWeights.resize(b.pairs());
+    m_boundarySum.resize(n);
+    m_bodyRate.resize(n);
     forEachParticle(n, [&](std::size_t i) {
         Vec3 sum = Vec3::Zero();
         Real squares = 0;
@@ -77,11 +77,18 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
             sum += g;
             squares += g.squaredNorm();
         }
+        Vec3 boundary = Vec3::Zero();
+        Real bodies = 0;
         for (std::size_t p = b.first(i); p < b.last(i); ++p) {
-            m_boundaryWeights[p] =
-                kWall * ctx.restDensity[i] * ctx.boundary.volume[b.indices[p]] * ctx.gradients.boundary[p];
-            sum += m_boundaryWeights[p] * (x[i] - ctx.boundary.x[b.indices[p]]);
+            const std::uint32_t k = b.indices[p];
+            m_boundaryWeights[p] = kWall * ctx.restDensity[i] * ctx.boundary.volume[k] * ctx.gradients.boundary[p];
+            const Vec3 g = m_boundaryWeights[p] * (x[i] - ctx.boundary.x[k]);
+            boundary += g;
+            bodies += ctx.boundary.v[k].dot(g);
         }
+        m_boundarySum[i] = boundary;
+        m_bodyRate[i] = bodies;
+        sum += boundary;
         const Real denominator = sum.squaredNorm() + squares;
         // Particles with (almost) no neighbours get no pressure: a lone particle cannot be compressed.
         const Real scale = m[i] / h4;

@@ -185,6 +185,7 @@ private:
     std::vector<Vec3> m_out;
     std::vector<Real> m_pairs, m_boundaryPairs;  // see pairs()
     std::vector<Mat3> m_fluidBlocks;
+    std::vector<Real> m_inverseDensity;  // 1 / rho_i of the step
     BodyLoads m_passLoads;    // the viscous loads of the latest pass, which a later pass of the step replaces
     std::size_t m_lastStep = 0;
     Real m_lastDt = 0, m_earlierDt = 0;  // the last two steps: scale the warm start

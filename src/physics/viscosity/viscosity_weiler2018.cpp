@@ -62,8 +62,8 @@ Real ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& pa
     // (I - dt A) in, with the bodies' velocities on the right-hand side
     return deterministicBlockSum(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::viscousProduct(begin, end, {&ctx.fluidNeighbours, pairs().data()},
-                               {&ctx.boundaryNeighbours, sticky() ? boundaryPairs().data() : nullptr},
-                               particles.x().data(), ctx.boundary.x.data(), in.data(), ctx.dt, out.data());
+                               sticky() ? m_boundaryBlock.data() : nullptr, particles.x().data(), in.data(), ctx.dt,
+                               out.data());
         Real s = 0;
         for (std::size_t i = begin; i < end; ++i) s += in[i].dot(out[i]);
         return s;
@@ -154,8 +154,8 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     m_guess.resize(n);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         sweeps::viscousProducts(begin, end, {&ctx.fluidNeighbours, pairs().data()},
-                                {&ctx.boundaryNeighbours, sticky() ? boundaryPairs().data() : nullptr}, x.data(),
-                                ctx.boundary.x.data(), v.data(), out.data(), dt, m_start.data(), m_guess.data());
+                                sticky() ? m_boundaryBlock.data() : nullptr, x.data(), v.data(), out.data(), dt,
+                                m_start.data(), m_guess.data());
     });
     ViscosityPass pass = m_cg.solve(system, precondition, m_b, v, m_start, m_guess, out, tolerance,
                                     std::size_t(m_params.maxIterations));
