@@ -108,3 +108,33 @@ TEST(PressureDFSPH, AnImpactsConstantDensitySolveRaisesTheNextDivergenceFreeMini
     EXPECT_GT(raised, 0u);
     EXPECT_GT(single, 0u);
 }
+
+TEST(PressureDFSPH, AFallingBlockSolvesNothingAndALandedOneTakesTheMinimum) {
+    // In free fall every particle keeps its neighbours and the density rate is round-off (1e-16 of rest density):
+    // neither solve has anything to do, and the fewest iterations (minIterations, minDivergenceIterations) are not
+    // spent on it. Once the block rests on the floor its residuals are real and the minimum holds again.
+    World world(0.01, Vec3(-0.3, -0.1, -0.3), Vec3(0.3, 0.5, 0.3));
+    world.block(Vec3(-0.1, 0.1, -0.1), Vec3(0.1, 0.3, 0.1), preset("honey"));
+    world.plane("floor");
+    world.effect<GravityParams>("gravity");
+    world.effect<ViscosityParams>("viscosity").mu = 1.0e3;
+    Simulation sim = world.simulation();
+    std::size_t fallingSteps = 0;
+    while (sim.time() < 0.1) {  // the block's bottom reaches the floor at sqrt(2 x 0.1 m / g) = 0.14 s
+        const std::size_t pressure = sim.stats().pressureIterations, divergence = sim.stats().divergenceIterations;
+        sim.step();
+        EXPECT_EQ(sim.stats().pressureIterations - pressure, 0u) << "step " << fallingSteps;
+        EXPECT_EQ(sim.stats().divergenceIterations - divergence, 0u) << "step " << fallingSteps;
+        ++fallingSteps;
+    }
+    sim.advanceTo(0.6);
+    std::size_t below = 0;
+    for (int step = 0; step < 20; ++step) {
+        const std::size_t pressure = sim.stats().pressureIterations;
+        sim.step();
+        below += sim.stats().pressureIterations - pressure < std::size_t(world.setup.pressure.minIterations);
+    }
+    std::printf("%zu falling steps solved nothing; %zu of 20 resting steps below the minimum\n", fallingSteps, below);
+    EXPECT_GT(fallingSteps, 5u);
+    EXPECT_EQ(below, 0u);
+}
