@@ -160,7 +160,8 @@ TEST(Heat, SurfaceIsTheOuterLayerAndLoneParticles) {
     world.effect<HeatParams>("heat");
     Simulation sim = world.simulation();
     const ParticleSet& p = sim.particles();
-    const auto surface = surfaceParticles(p, sim.density(), sim.fluidNeighbours(), sim.kernel(), 0.5);
+    const auto surface = surfaceParticles(p, sim.density(), sim.fluidNeighbours(), sim.gradients().fluid,
+                                          sim.kernel().supportRadius(), 0.5);
     std::size_t outer = 0;
     for (std::size_t i = 0; i < p.size(); ++i) {
         const Vec3& x = p.x()[i];

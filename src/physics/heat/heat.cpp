@@ -106,17 +106,19 @@ std::shared_ptr<const EffectParams> readHeat(Section& s) {
 }
 
 std::vector<std::uint8_t> surfaceParticles(const ParticleSet& particles, const std::vector<Real>& density,
-                                           const NeighbourList& neighbours, const CubicSpline& kernel,
-                                           Real threshold) {
+                                           const NeighbourList& neighbours, const std::vector<Real>& gradients,
+                                           Real support, Real threshold) {
     const auto& x = particles.x();
     const auto& m = particles.mass();
-    const Real h = kernel.supportRadius();
     std::vector<std::uint8_t> surface(particles.size(), 0);
     forEachParticle(particles.size(), [&](std::size_t i) {
         // Colour-field normal h sum_j V_j grad W_ij: zero inside a full neighbourhood, about 1 on a flat surface.
         Vec3 n = Vec3::Zero();
-        for (std::uint32_t j : neighbours.of(i)) n += (m[j] / density[j]) * kernel.gradW(x[i] - x[j]);
-        surface[i] = h * n.norm() >= threshold || neighbours.of(i).size() < kMinSurfaceNeighbours;
+        for (std::size_t p = neighbours.first(i); p < neighbours.last(i); ++p) {
+            const std::uint32_t j = neighbours.indices[p];
+            n += (m[j] / density[j]) * (gradients[p] * (x[i] - x[j]));
+        }
+        surface[i] = support * n.norm() >= threshold || neighbours.of(i).size() < kMinSurfaceNeighbours;
     });
     return surface;
 }
@@ -222,7 +224,8 @@ public:
         // Sources and radiation act on the surface only.
         if (m_params.sources.empty() && m_params.radiationTime <= 0) return;
         const auto surface =
-            surfaceParticles(particles, rho, ctx.fluidNeighbours, ctx.kernel, m_params.surfaceThreshold);
+            surfaceParticles(particles, rho, ctx.fluidNeighbours, ctx.gradients.fluid, ctx.kernel.supportRadius(),
+                             m_params.surfaceThreshold);
         const Real t = ctx.time + 0.5 * ctx.dt;
         const Real decay = m_params.radiationTime > 0 ? std::exp(-ctx.dt / m_params.radiationTime) : 1;
         forEachParticle(n, [&](std::size_t i) {

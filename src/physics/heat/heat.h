@@ -57,9 +57,10 @@ struct HeatParams : EffectParams {
 std::shared_ptr<const EffectParams> readHeat(Section& s);
 std::unique_ptr<Effect> makeHeat(const EffectParams& params, const SimulationSetup& setup, ParticleSet& particles);
 
-/// Which particles are on the surface, as the heat effect decides it (exposed for tests).
+/// Which particles are on the surface, as the heat effect decides it (exposed for tests): from the step's kernel
+/// gradient factors of the neighbour pairs (PairGradients::fluid) and the kernel's support [m].
 std::vector<std::uint8_t> surfaceParticles(const ParticleSet& particles, const std::vector<Real>& density,
-                                           const NeighbourList& neighbours, const CubicSpline& kernel,
-                                           Real threshold);
+                                           const NeighbourList& neighbours, const std::vector<Real>& gradients,
+                                           Real support, Real threshold);
 
 }  // namespace ganache
