@@ -180,7 +180,9 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
                 const Real weight = -dt * pairs[p];  // the pair's share of (I - dt A), positive
                 const Vec6 ui = rigidImage(ai, d);
                 diagonal.noalias() += (weight * ui) * ui.transpose();
-                if (cj != kNone) blockWith(cj).noalias() -= (weight * ui) * rigidImage(arm(cj, x[j]), d).transpose();
+                // Only the lower triangle is kept (below): the blocks with clusters of a higher index.
+                if (cj != kNone && cj > c)
+                    blockWith(cj).noalias() -= (weight * ui) * rigidImage(arm(cj, x[j]), d).transpose();
             }
         }
         const Real count = Real(m_firstMember[c + 1] - m_firstMember[c]);
@@ -189,10 +191,8 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
         // rest keeps E definite. Those modes neither take part of r (Z^T r) nor give velocity (Z y), so the floor
         // changes nothing else.
         diagonal.bottomRightCorner<3, 3>().diagonal().array() += 1e-12 * diagonal.trace();
-        // Only the lower triangle is kept: the blocks with clusters of a higher index.
         rows[c].emplace_back(std::uint32_t(c), diagonal);
-        for (const auto& entry : offDiagonal)
-            if (entry.first > c) rows[c].push_back(entry);
+        rows[c].insert(rows[c].end(), offDiagonal.begin(), offDiagonal.end());
         std::sort(rows[c].begin(), rows[c].end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     });
 
