@@ -3,8 +3,8 @@
 // (pair_sweeps.cpp is compiled with reassociation allowed and without SIMD; see src/CMakeLists.txt). Each pair's
 // geometry is computed once per step: the solvers pass per-pair weights in the order of the neighbour lists, and the
 // sweeps only combine them with the current vectors. The boundary stands still during a solve and its particles carry
-// no unknowns, so it enters as one sum per fluid particle, taken once a step, instead of its pairs. A particle's sum is always taken in the same order, so results
-// do not depend on the thread count.
+// no unknowns, so it enters as one sum per fluid particle, taken once a step, instead of its pairs. A particle's sum
+// is always taken in the same order, so results do not depend on the thread count.
 
 #include "core/neighbour_search.h"
 #include "core/types.h"
