@@ -117,3 +117,50 @@ TEST(ClusterModes, FewerLargerClustersStillHoldTheWholeFluidsRigidMotion) {
     modes.addCorrection(s.x, s.multiply(motion), z);
     EXPECT_LT(largestDifference(z, motion), 1e-9);
 }
+
+TEST(BlockLdlt, SolvesASparseBlockSystemAsADenseFactorisationDoes) {
+    // A symmetric positive definite matrix of 6x6 blocks coupled as the cells of a 4 x 4 x 3 grid are (the coarse
+    // system's pattern: each cluster with its face, edge and corner neighbours), with random blocks. Its solution must
+    // match a dense LDL^T of the same matrix to round-off: about 1e-13 of the solution for this conditioning.
+    constexpr int nx = 4, ny = 4, nz = 3, m = nx * ny * nz;
+    std::mt19937 rng(11);
+    std::normal_distribution<Real> normal;
+    auto randomBlock = [&] {
+        Mat6 b;
+        for (int r = 0; r < 6; ++r)
+            for (int c = 0; c < 6; ++c) b(r, c) = normal(rng);
+        return b;
+    };
+    Eigen::MatrixXd dense = Eigen::MatrixXd::Zero(6 * m, 6 * m);
+    std::vector<std::vector<std::pair<std::uint32_t, Mat6>>> lower(m);
+    auto index = [&](int a, int b, int c) { return (a * ny + b) * nz + c; };
+    for (int a = 0; a < nx; ++a)
+        for (int b = 0; b < ny; ++b)
+            for (int c = 0; c < nz; ++c)
+                for (int da = -1; da <= 1; ++da)
+                    for (int db = -1; db <= 1; ++db)
+                        for (int dc = -1; dc <= 1; ++dc) {
+                            const int p = a + da, q = b + db, r = c + dc;
+                            if (p < 0 || p >= nx || q < 0 || q >= ny || r < 0 || r >= nz) continue;
+                            const int i = index(a, b, c), j = index(p, q, r);
+                            if (j <= i) continue;
+                            const Mat6 block = 0.1 * randomBlock();  // E[i, j]
+                            lower[std::size_t(i)].emplace_back(std::uint32_t(j), block);
+                            dense.block<6, 6>(6 * i, 6 * j) = block;
+                            dense.block<6, 6>(6 * j, 6 * i) = block.transpose();
+                        }
+    for (int i = 0; i < m; ++i) {
+        const Mat6 g = randomBlock();
+        const Mat6 diagonal = g * g.transpose() + 30 * Mat6::Identity();  // dominant: 26 neighbours of 0.1 N(0, 1)
+        dense.block<6, 6>(6 * i, 6 * i) = diagonal;
+        lower[std::size_t(i)].insert(lower[std::size_t(i)].begin(), {std::uint32_t(i), diagonal});
+    }
+    BlockLdlt factor;
+    factor.factor(lower);
+    Eigen::VectorXd b(6 * m);
+    for (int i = 0; i < 6 * m; ++i) b[i] = normal(rng);
+    const Eigen::VectorXd expected = dense.ldlt().solve(b);
+    Eigen::VectorXd x = b;
+    factor.solve(x);
+    EXPECT_LT((x - expected).norm(), 1e-12 * expected.norm());
+}

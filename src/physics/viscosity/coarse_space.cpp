@@ -2,7 +2,10 @@
 
 #include "core/parallel.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
+#include <Eigen/OrderingMethods>
+#include <Eigen/SparseCore>
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
@@ -94,6 +97,102 @@ Vec6 RigidModes::project(const std::vector<Vec3>& x, const std::vector<Vec3>& r)
         }
         return y;
     }, Vec6::Zero());
+}
+
+void BlockLdlt::factor(const std::vector<std::vector<std::pair<std::uint32_t, Mat6>>>& lower) {
+    const std::size_t m = lower.size();
+    // Every block of the symmetric matrix by column: (row o, E[o, c]).
+    std::vector<std::vector<std::pair<std::uint32_t, const Mat6*>>> below(m), above(m);
+    for (std::size_t c = 0; c < m; ++c)
+        for (const auto& [o, block] : lower[c])
+            if (o != c) below[c].emplace_back(o, &block), above[o].emplace_back(std::uint32_t(c), &block);
+
+    // The elimination order: approximate minimum degree on the block graph.
+    const Eigen::Index size = static_cast<Eigen::Index>(m);
+    Eigen::SparseMatrix<Real> graph(size, size);
+    std::vector<Eigen::Triplet<Real>> links;
+    for (std::size_t c = 0; c < m; ++c) {
+        links.emplace_back(int(c), int(c), 1);
+        for (const auto& entry : below[c]) {
+            links.emplace_back(int(entry.first), int(c), 1);
+            links.emplace_back(int(c), int(entry.first), 1);
+        }
+    }
+    graph.setFromTriplets(links.begin(), links.end());
+    Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> order;
+    Eigen::AMDOrdering<int>()(graph, order);
+    m_order.resize(m);
+    std::vector<std::uint32_t> position(m);
+    for (std::size_t k = 0; k < m; ++k) {
+        m_order[k] = std::uint32_t(order.indices()[Eigen::Index(k)]);
+        position[m_order[k]] = std::uint32_t(k);
+    }
+
+    // The elimination tree (Liu's algorithm with path compression).
+    constexpr std::uint32_t kRoot = ~std::uint32_t(0);
+    std::vector<std::uint32_t> parent(m, kRoot), ancestor(m, kRoot);
+    auto earlierNeighbours = [&](std::size_t k, auto&& visit) {
+        const std::uint32_t c = m_order[k];
+        for (const auto& [o, block] : below[c])
+            if (position[o] < k) visit(position[o], block->transpose());  // E[o, c] = E[c, o]^T
+        for (const auto& [o, block] : above[c])
+            if (position[o] < k) visit(position[o], *block);  // E[o, c], stored in o's row
+    };
+    for (std::size_t k = 0; k < m; ++k)
+        earlierNeighbours(k, [&](std::uint32_t i, const auto&) {
+            for (std::uint32_t r = i; r != kRoot && r != k;) {
+                const std::uint32_t next = ancestor[r];
+                ancestor[r] = std::uint32_t(k);
+                if (next == kRoot) parent[r] = std::uint32_t(k);
+                r = next;
+            }
+        });
+
+    // Row k of L from E's column k above the diagonal, A_ik (i < k): Z_i = A_ik - sum_j L_ij Z_j in the order of the
+    // elimination tree, L_ki = Z_i^T D_i^-1, D_k = A_kk - sum_i L_ki Z_i.
+    m_columns.assign(m, {});
+    m_inverseDiagonal.resize(m);
+    std::vector<Mat6> z(m, Mat6::Zero());
+    std::vector<std::uint32_t> tag(m, kRoot), pattern(m), path(m);
+    for (std::size_t k = 0; k < m; ++k) {
+        std::size_t top = m;
+        tag[k] = std::uint32_t(k);  // the walks up the tree stop at k
+        earlierNeighbours(k, [&](std::uint32_t i, const auto& block) {
+            z[i] = block;
+            std::size_t length = 0;
+            for (std::uint32_t r = i; tag[r] != k; r = parent[r]) path[length++] = r, tag[r] = std::uint32_t(k);
+            while (length > 0) pattern[--top] = path[--length];
+        });
+        const std::uint32_t c = m_order[k];
+        Mat6 d = lower[c].front().second;  // the diagonal block comes first: o ascending from c
+        for (std::size_t t = top; t < m; ++t) {
+            const std::uint32_t i = pattern[t];
+            const Mat6 zi = z[i];
+            z[i].setZero();
+            for (const auto& [row, block] : m_columns[i]) z[row].noalias() -= block * zi;
+            const Mat6 l = zi.transpose() * m_inverseDiagonal[i];
+            d.noalias() -= l * zi;
+            m_columns[i].emplace_back(std::uint32_t(k), l);
+        }
+        // A pivot block of a cluster without rotations (one particle, or particles on a line) holds only the floor
+        // there and may come out of round-off slightly indefinite: a pivoting LDL^T of the block keeps it usable.
+        m_inverseDiagonal[k] = d.ldlt().solve(Mat6::Identity());
+        if (!m_inverseDiagonal[k].allFinite())
+            throw std::runtime_error("the viscosity coarse space could not be factored (a non-finite coefficient?); "
+                                     "lower simulation.time_step.max");
+    }
+    m_work.resize(m);
+}
+
+void BlockLdlt::solve(Eigen::Matrix<Real, Eigen::Dynamic, 1>& b) const {
+    const std::size_t m = m_order.size();
+    for (std::size_t k = 0; k < m; ++k) m_work[k] = b.segment<6>(Eigen::Index(6 * m_order[k]));
+    for (std::size_t k = 0; k < m; ++k)  // L y = b
+        for (const auto& [row, block] : m_columns[k]) m_work[row].noalias() -= block * m_work[k];
+    for (std::size_t k = 0; k < m; ++k) m_work[k] = m_inverseDiagonal[k] * m_work[k];  // D
+    for (std::size_t k = m; k-- > 0;)  // L^T x = y
+        for (const auto& [row, block] : m_columns[k]) m_work[k].noalias() -= block.transpose() * m_work[row];
+    for (std::size_t k = 0; k < m; ++k) b.segment<6>(Eigen::Index(6 * m_order[k])) = m_work[k];
 }
 
 void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint8_t>* group, Real cellSize,
@@ -196,26 +295,8 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
         std::sort(rows[c].begin(), rows[c].end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     });
 
-    // Column c of the lower triangle holds E[other, c] = E[c, other]^T for the stored blocks of row c; filled in order,
-    // so every insertion appends.
-    const Eigen::Index size = Eigen::Index(6 * clusters);
-    Eigen::SparseMatrix<Real> e(size, size);
-    Eigen::VectorXi perColumn(size);
-    for (std::size_t c = 0; c < clusters; ++c) perColumn.segment<6>(Eigen::Index(6 * c)).setConstant(int(6 * rows[c].size()));
-    e.reserve(perColumn);
-    for (std::size_t c = 0; c < clusters; ++c)
-        for (int col = 0; col < 6; ++col)
-            for (const auto& [other, block] : rows[c])
-                for (int r = 0; r < 6; ++r) {
-                    if (other == c && r < col) continue;
-                    e.insert(Eigen::Index(6 * other + r), Eigen::Index(6 * c + col)) = block(col, r);
-                }
-    e.makeCompressed();
-    m_factor.compute(e);
-    if (m_factor.info() != Eigen::Success)
-        throw std::runtime_error("the viscosity coarse space could not be factored (a non-finite coefficient?); "
-                                 "lower simulation.time_step.max");
-    m_rhs.resize(size);
+    m_factor.factor(rows);
+    m_rhs.resize(Eigen::Index(6 * clusters));
 }
 
 void ClusterModes::addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const {
@@ -228,11 +309,11 @@ void ClusterModes::addCorrection(const std::vector<Vec3>& x, const std::vector<V
         }
         m_rhs.segment<6>(Eigen::Index(6 * c)) = y;
     }, 64);
-    const Eigen::Matrix<Real, Eigen::Dynamic, 1> motion = m_factor.solve(m_rhs);
+    m_factor.solve(m_rhs);
     forEachParticle(x.size(), [&](std::size_t i) {
         const std::size_t c = m_of[i];
         if (c == kNone) return;
-        const Vec6 y = motion.segment<6>(Eigen::Index(6 * c));
+        const Vec6 y = m_rhs.segment<6>(Eigen::Index(6 * c));
         z[i] += y.head<3>() + y.tail<3>().cross(arm(c, x[i]));
     });
 }

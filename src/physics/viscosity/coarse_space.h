@@ -6,7 +6,6 @@
 
 #include "core/neighbour_search.h"
 
-#include <Eigen/SparseCholesky>
 
 #include <cstdint>
 #include <vector>
@@ -39,10 +38,29 @@ private:
     Mat6 m_inverse = Mat6::Zero();
 };
 
+/// LDL^T of a symmetric positive definite matrix of 6x6 blocks with a sparse block pattern (the coarse system E):
+/// the blocks ordered by approximate minimum degree on the block graph, then factored row by row (up-looking), every
+/// operation a product of 6x6 blocks. A scalar sparse Cholesky of the same matrix spent its time on indices.
+class BlockLdlt {
+public:
+    /// lower[c]: the blocks (o, E[c, o]) of row c with o >= c, the diagonal block among them, o ascending.
+    /// Throws std::runtime_error where a pivot block is not positive definite (a non-finite coefficient).
+    void factor(const std::vector<std::vector<std::pair<std::uint32_t, Mat6>>>& lower);
+    /// E^-1 b for b of 6 entries a block, in place.
+    void solve(Eigen::Matrix<Real, Eigen::Dynamic, 1>& b) const;
+
+private:
+    std::vector<std::uint32_t> m_order;  // the block eliminated k-th
+    std::vector<Mat6> m_inverseDiagonal;  // D_k^-1
+    // L's blocks below the diagonal, by column in elimination order: (row k, L_k,column), k ascending.
+    std::vector<std::vector<std::pair<std::uint32_t, Mat6>>> m_columns;
+    mutable std::vector<Vec6> m_work;
+};
+
 /// The rigid motions of each cluster of fluid particles, the clusters being the cells of a grid (split by group where
 /// groups are given). The coarse system E = Z^T M Z has a 6x6 block per pair of adjacent clusters; it is assembled
 /// from the pairs that cross clusters (pairs within one cluster do not act on its rigid motions) and factored by
-/// sparse Cholesky.
+/// BlockLdlt.
 class ClusterModes {
 public:
     /// A group that keeps its particles out of every cluster (their rows of Z are zero).
@@ -68,7 +86,7 @@ private:
     std::vector<std::uint32_t> m_of;                      // each particle's cluster, or kNone
     std::vector<std::uint32_t> m_members, m_firstMember;  // the particles of cluster c, ascending
     std::vector<Vec3> m_centre;
-    Eigen::SimplicialLDLT<Eigen::SparseMatrix<Real>> m_factor;
+    BlockLdlt m_factor;
     mutable Eigen::Matrix<Real, Eigen::Dynamic, 1> m_rhs;
 };
 

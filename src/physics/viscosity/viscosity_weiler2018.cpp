@@ -13,10 +13,11 @@ namespace {
 
 // The coarse space's clusters: cells of two kernel supports (about 4^3 = 64 particles at support 4 r, spacing 2 r),
 // larger where that would make more than 6 n^0.4 clusters. Factoring the coarse system grows faster than the fine
-// products (measured: 2 ms for 120 clusters, 200 ms for 750), so the cap keeps it to a few CG iterations' worth:
-// 43k particles of chocolate, 360 clusters, 29 CG iterations a solve (cells of two supports: 23.5 iterations but 200
-// ms a factorisation; the fluid-wide rigid modes: 94). Cells of three supports left some melting steps of the
-// default scene at the 100-iteration cap; two left none.
+// products (measured with a scalar sparse Cholesky: 2 ms for 120 clusters, 200 ms for 750; the block LDL^T that
+// replaced it took the default scene's viscosity a quarter to a third lower), so the cap keeps it to a few CG
+// iterations' worth: 43k particles of chocolate, 360 clusters, 29 CG iterations a solve (cells of two supports: 23.5
+// iterations but 200 ms a factorisation; the fluid-wide rigid modes: 94). Cells of three supports left some melting
+// steps of the default scene at the 100-iteration cap; two left none.
 constexpr Real kClusterSize = 2;
 std::size_t maxClusters(std::size_t particles) {
     return std::size_t(std::clamp(6 * std::pow(Real(particles), 0.4), 64.0, 4096.0));
