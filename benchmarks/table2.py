@@ -56,7 +56,7 @@ def scene_text(row, kind, dt, mu):
     text = re.sub(r"viscosity: \{mu: [\d.eE+-]+", f"viscosity: {{mu: {mu}", text)
     text = text.replace("\neffects:", f"\nsimulation: {{time_step: {{fixed: {dt}}}, checkpoint_every: 0}}\n\neffects:")
     text = re.sub(r"\nsurface:.*", "", text, flags=re.S)  # the solver only
-    if kind in ("bunny", "bunny_grid"):
+    if kind != "statue":
         # Dropped from the scene's 6 cm above the bars the bunny would still be falling freely after STEPS steps.
         if kind == "bunny":
             text = re.sub(r"\n  - \{name: grid, bars:[^\n]*", "", text)

@@ -99,13 +99,13 @@ Vec6 RigidModes::project(const std::vector<Vec3>& x, const std::vector<Vec3>& r)
     }, Vec6::Zero());
 }
 
-void BlockLdlt::factor(const std::vector<std::vector<std::pair<std::uint32_t, Mat6>>>& lower) {
-    const std::size_t m = lower.size();
-    // Every block of the symmetric matrix by column: (row o, E[o, c]).
-    std::vector<std::vector<std::pair<std::uint32_t, const Mat6*>>> below(m), above(m);
+void BlockLdlt::factor(const std::vector<std::vector<std::pair<std::uint32_t, Mat6>>>& rows) {
+    const std::size_t m = rows.size();
+    // Each off-diagonal block E[c, o] (c < o) from both ends: later[c] holds (o, E[c, o]), earlier[o] (c, E[c, o]).
+    std::vector<std::vector<std::pair<std::uint32_t, const Mat6*>>> later(m), earlier(m);
     for (std::size_t c = 0; c < m; ++c)
-        for (const auto& [o, block] : lower[c])
-            if (o != c) below[c].emplace_back(o, &block), above[o].emplace_back(std::uint32_t(c), &block);
+        for (const auto& [o, block] : rows[c])
+            if (o != c) later[c].emplace_back(o, &block), earlier[o].emplace_back(std::uint32_t(c), &block);
 
     // The elimination order: approximate minimum degree on the block graph.
     const Eigen::Index size = static_cast<Eigen::Index>(m);
@@ -113,7 +113,7 @@ void BlockLdlt::factor(const std::vector<std::vector<std::pair<std::uint32_t, Ma
     std::vector<Eigen::Triplet<Real>> links;
     for (std::size_t c = 0; c < m; ++c) {
         links.emplace_back(int(c), int(c), 1);
-        for (const auto& entry : below[c]) {
+        for (const auto& entry : later[c]) {
             links.emplace_back(int(entry.first), int(c), 1);
             links.emplace_back(int(c), int(entry.first), 1);
         }
@@ -133,9 +133,9 @@ void BlockLdlt::factor(const std::vector<std::vector<std::pair<std::uint32_t, Ma
     std::vector<std::uint32_t> parent(m, kRoot), ancestor(m, kRoot);
     auto earlierNeighbours = [&](std::size_t k, auto&& visit) {
         const std::uint32_t c = m_order[k];
-        for (const auto& [o, block] : below[c])
+        for (const auto& [o, block] : later[c])
             if (position[o] < k) visit(position[o], block->transpose());  // E[o, c] = E[c, o]^T
-        for (const auto& [o, block] : above[c])
+        for (const auto& [o, block] : earlier[c])
             if (position[o] < k) visit(position[o], *block);  // E[o, c], stored in o's row
     };
     for (std::size_t k = 0; k < m; ++k)
@@ -164,7 +164,7 @@ void BlockLdlt::factor(const std::vector<std::vector<std::pair<std::uint32_t, Ma
             while (length > 0) pattern[--top] = path[--length];
         });
         const std::uint32_t c = m_order[k];
-        Mat6 d = lower[c].front().second;  // the diagonal block comes first: o ascending from c
+        Mat6 d = rows[c].front().second;  // the diagonal block comes first: o ascending from c
         for (std::size_t t = top; t < m; ++t) {
             const std::uint32_t i = pattern[t];
             const Mat6 zi = z[i];
@@ -279,7 +279,7 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
                 const Real weight = -dt * pairs[p];  // the pair's share of (I - dt A), positive
                 const Vec6 ui = rigidImage(ai, d);
                 diagonal.noalias() += (weight * ui) * ui.transpose();
-                // Only the lower triangle is kept (below): the blocks with clusters of a higher index.
+                // One triangle is kept (BlockLdlt's rows): the blocks with clusters of a higher index.
                 if (cj != kNone && cj > c)
                     blockWith(cj).noalias() -= (weight * ui) * rigidImage(arm(cj, x[j]), d).transpose();
             }

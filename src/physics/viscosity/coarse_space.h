@@ -6,7 +6,6 @@
 
 #include "core/neighbour_search.h"
 
-
 #include <cstdint>
 #include <vector>
 
@@ -43,9 +42,9 @@ private:
 /// operation a product of 6x6 blocks. A scalar sparse Cholesky of the same matrix spent its time on indices.
 class BlockLdlt {
 public:
-    /// lower[c]: the blocks (o, E[c, o]) of row c with o >= c, the diagonal block among them, o ascending.
-    /// Throws std::runtime_error where a pivot block is not positive definite (a non-finite coefficient).
-    void factor(const std::vector<std::vector<std::pair<std::uint32_t, Mat6>>>& lower);
+    /// rows[c]: the blocks (o, E[c, o]) of row c with o >= c (one triangle; E[o, c] = E[c, o]^T), the diagonal block
+    /// first, o ascending. Throws std::runtime_error where a pivot block cannot be inverted (a non-finite coefficient).
+    void factor(const std::vector<std::vector<std::pair<std::uint32_t, Mat6>>>& rows);
     /// E^-1 b for b of 6 entries a block, in place.
     void solve(Eigen::Matrix<Real, Eigen::Dynamic, 1>& b) const;
 
