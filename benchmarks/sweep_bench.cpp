@@ -23,6 +23,7 @@ constexpr Real kRadius = 0.01;
 
 struct Block {
     std::vector<Vec3> x, v;
+    sweeps::Rows xRows, vRows;  // as the sweeps read them
     NeighbourList pairs;
     std::vector<Real> weight;  // one per pair
 };
@@ -45,6 +46,10 @@ Block block(std::size_t n) {
     findFluidNeighbours(grid, b.x, supportRadiusFor(kRadius), b.pairs);
     for (std::size_t i = 0; i < b.x.size(); ++i) b.v.emplace_back(unit(rng), unit(rng), unit(rng));
     for (std::size_t p = 0; p < b.pairs.pairs(); ++p) b.weight.push_back(-1e3 * (1 + 0.1 * unit(rng)));
+    b.xRows.resize(b.x.size());
+    b.vRows.resize(b.x.size());
+    sweeps::toRows(0, b.x.size(), b.x.data(), b.xRows.data());
+    sweeps::toRows(0, b.x.size(), b.v.data(), b.vRows.data());
     return b;
 }
 
@@ -69,9 +74,14 @@ void viscous(benchmark::State& state) {
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(1)));
     const Block b = block(std::size_t(state.range(0)));
     std::vector<Vec3> out(b.x.size());
+    sweeps::Rows in(b.x.size());
     for (auto _ : state) {
+        // as the solver makes it: the input into rows, then the product
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
-            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.x.data(), b.v.data(), 1e-3,
+            sweeps::toRows(begin, end, b.v.data(), in.data());
+        });
+        forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
+            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.xRows.data(), in.data(), 1e-3,
                                    out.data());
         });
         benchmark::DoNotOptimize(out.data());
@@ -84,13 +94,18 @@ void pressure(benchmark::State& state) {
     const Block b = block(std::size_t(state.range(0)));
     std::vector<Real> s(b.x.size(), 1), rate(b.x.size());
     std::vector<Vec3> dv(b.x.size());
+    sweeps::Rows u(b.x.size());
     for (auto _ : state) {
+        // as the solver makes them: the velocity change, its rows, the rate
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
-            sweeps::pressureChange(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.x.data(), s.data(), 1e-3,
+            sweeps::pressureChange(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.xRows.data(), s.data(), 1e-3,
                                    dv.data());
         });
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
-            sweeps::densityRate(begin, end, {&b.pairs, b.weight.data()}, nullptr, nullptr, b.x.data(), dv.data(),
+            sweeps::toRows(begin, end, dv.data(), u.data());
+        });
+        forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
+            sweeps::densityRate(begin, end, {&b.pairs, b.weight.data()}, nullptr, nullptr, b.xRows.data(), u.data(),
                                 rate.data());
         });
         benchmark::DoNotOptimize(rate.data());

@@ -2,45 +2,123 @@
 
 #include <cstdint>
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 namespace ganache::sweeps {
 
 namespace {
 
-// Positions and velocities are arrays of Vec3: three doubles each, contiguous.
-inline const Real* raw(const Vec3* v) { return v->data(); }
+// Four lanes of doubles: one lane per pair of a group of four. Gathering instructions were tried for the neighbours'
+// values and ran at half the speed of the scalar loops on AMD's cores; aligned row loads and a transpose do not.
+#if defined(__AVX2__)
+struct Lanes {
+    __m256d v;
+};
+inline Lanes operator+(Lanes a, Lanes b) { return {_mm256_add_pd(a.v, b.v)}; }
+inline Lanes operator-(Lanes a, Lanes b) { return {_mm256_sub_pd(a.v, b.v)}; }
+inline Lanes operator*(Lanes a, Lanes b) { return {_mm256_mul_pd(a.v, b.v)}; }
+inline Lanes zero() { return {_mm256_setzero_pd()}; }
+inline Lanes broadcast(Real a) { return {_mm256_set1_pd(a)}; }
+inline Lanes load(const Row& r) { return {_mm256_load_pd(r.data())}; }
+// w[0, count), zero beyond: a tail never reads past its particle's pairs.
+inline Lanes loadWeights(const Real* w, int count) {
+    if (count == 4) return {_mm256_loadu_pd(w)};
+    const __m256i mask = _mm256_cmpgt_epi64(_mm256_set1_epi64x(count), _mm256_setr_epi64x(0, 1, 2, 3));
+    return {_mm256_maskload_pd(w, mask)};
+}
+// Lane l of c[k] is entry k of row r[l].
+inline void transpose(const Row* const (&r)[4], Lanes (&c)[4]) {
+    const __m256d r0 = _mm256_load_pd(r[0]->data()), r1 = _mm256_load_pd(r[1]->data());
+    const __m256d r2 = _mm256_load_pd(r[2]->data()), r3 = _mm256_load_pd(r[3]->data());
+    const __m256d t0 = _mm256_unpacklo_pd(r0, r1), t1 = _mm256_unpackhi_pd(r0, r1);
+    const __m256d t2 = _mm256_unpacklo_pd(r2, r3), t3 = _mm256_unpackhi_pd(r2, r3);
+    c[0].v = _mm256_permute2f128_pd(t0, t2, 0x20);
+    c[1].v = _mm256_permute2f128_pd(t1, t3, 0x20);
+    c[2].v = _mm256_permute2f128_pd(t0, t2, 0x31);
+    c[3].v = _mm256_permute2f128_pd(t1, t3, 0x31);
+}
+inline Row row(Lanes a) {
+    Row r;
+    _mm256_store_pd(r.data(), a.v);
+    return r;
+}
+#else
+struct Lanes {
+    Real v[4];
+};
+template <class Op>
+inline Lanes lanewise(Lanes a, Lanes b, Op op) {
+    return {{op(a.v[0], b.v[0]), op(a.v[1], b.v[1]), op(a.v[2], b.v[2]), op(a.v[3], b.v[3])}};
+}
+inline Lanes operator+(Lanes a, Lanes b) { return lanewise(a, b, [](Real x, Real y) { return x + y; }); }
+inline Lanes operator-(Lanes a, Lanes b) { return lanewise(a, b, [](Real x, Real y) { return x - y; }); }
+inline Lanes operator*(Lanes a, Lanes b) { return lanewise(a, b, [](Real x, Real y) { return x * y; }); }
+inline Lanes zero() { return {{0, 0, 0, 0}}; }
+inline Lanes broadcast(Real a) { return {{a, a, a, a}}; }
+inline Lanes load(const Row& r) { return {{r[0], r[1], r[2], r[3]}}; }
+inline Lanes loadWeights(const Real* w, int count) {
+    Lanes out = zero();
+    for (int l = 0; l < count; ++l) out.v[l] = w[l];
+    return out;
+}
+inline void transpose(const Row* const (&r)[4], Lanes (&c)[4]) {
+    for (int k = 0; k < 4; ++k)
+        for (int l = 0; l < 4; ++l) c[k].v[l] = (*r[l])[k];
+}
+inline Row row(Lanes a) { return Row(a.v[0], a.v[1], a.v[2], a.v[3]); }
+#endif
+inline Real sum(Lanes a) {
+    const Row l = row(a);
+    return (l[0] + l[1]) + (l[2] + l[3]);
+}
 
-}  // namespace
-
-namespace {
+// Calls pair(c, k, rows) for each group of four of particle i's pairs: c[l] the neighbours' rows of `rows[s]` for
+// each source s, transposed, and k their weights. A tail's missing pairs are particle i itself with weight zero: a
+// pair of a particle with itself has x_ij = 0 and adds nothing.
+template <int S, class Pair>
+inline void forEachGroup(std::size_t i, Pairs fluid, const Row* const (&rows)[S], Pair pair) {
+    const std::uint64_t begin = fluid.list->offsets[i], end = fluid.list->offsets[i + 1];
+    const std::uint32_t* idx = fluid.list->indices.data();
+    for (std::uint64_t p = begin; p < end; p += 4) {
+        const int count = int(std::min<std::uint64_t>(4, end - p));
+        std::size_t j[4];
+        for (int l = 0; l < 4; ++l) j[l] = l < count ? idx[p + l] : i;
+        Lanes c[S][4];
+        for (int s = 0; s < S; ++s) {
+            const Row* const r[4] = {rows[s] + j[0], rows[s] + j[1], rows[s] + j[2], rows[s] + j[3]};
+            transpose(r, c[s]);
+        }
+        pair(c, loadWeights(fluid.weight + p, count));
+    }
+}
 
 // The viscous product for N inputs in one pass over the pairs (the pairs' geometry is read once for all of them).
 template <int N>
-void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* xv,
-                       const Vec3* const (&inv)[N], Real dt, Vec3* const (&out)[N]) {
-    const Real* x = raw(xv);
-    const Real* v[N];
-    for (int c = 0; c < N; ++c) v[c] = raw(inv[c]);
-    const std::uint64_t* off = fluid.list->offsets.data();
-    const std::uint32_t* idx = fluid.list->indices.data();
-    const Real* k = fluid.weight;
+void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+                       const Row* const (&in)[N], Real dt, Vec3* const (&out)[N]) {
+    const Row* rows[N + 1] = {x};
+    for (int c = 0; c < N; ++c) rows[c + 1] = in[c];
     for (std::size_t i = begin; i < end; ++i) {
-        const Real xi0 = x[3 * i], xi1 = x[3 * i + 1], xi2 = x[3 * i + 2];
-        Real a[N][3] = {};
-        for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
-            const std::size_t j = 3 * std::size_t(idx[p]);
-            const Real d0 = xi0 - x[j], d1 = xi1 - x[j + 1], d2 = xi2 - x[j + 2];
+        const Lanes xi[3] = {broadcast(x[i][0]), broadcast(x[i][1]), broadcast(x[i][2])};
+        Lanes ui[N][3], a[N][3];
+        for (int c = 0; c < N; ++c)
+            for (int d = 0; d < 3; ++d) ui[c][d] = broadcast(in[c][i][d]), a[c][d] = zero();
+        forEachGroup<N + 1>(i, fluid, rows, [&](const Lanes (&r)[N + 1][4], Lanes k) {
+            const Lanes d0 = xi[0] - r[0][0], d1 = xi[1] - r[0][1], d2 = xi[2] - r[0][2];
             for (int c = 0; c < N; ++c) {
-                const Real* u = v[c];
-                const Real s =
-                    k[p] * (d0 * (u[3 * i] - u[j]) + d1 * (u[3 * i + 1] - u[j + 1]) + d2 * (u[3 * i + 2] - u[j + 2]));
-                a[c][0] += s * d0;
-                a[c][1] += s * d1;
-                a[c][2] += s * d2;
+                const Lanes (&u)[4] = r[c + 1];
+                const Lanes s = k * ((d0 * (ui[c][0] - u[0]) + d1 * (ui[c][1] - u[1])) + d2 * (ui[c][2] - u[2]));
+                a[c][0] = a[c][0] + s * d0;
+                a[c][1] = a[c][1] + s * d1;
+                a[c][2] = a[c][2] + s * d2;
             }
-        }
+        });
         for (int c = 0; c < N; ++c) {
-            Vec3 o(v[c][3 * i] - dt * a[c][0], v[c][3 * i + 1] - dt * a[c][1], v[c][3 * i + 2] - dt * a[c][2]);
-            if (boundaryBlock) o += boundaryBlock[i] * inv[c][i];
+            const Vec3 v(in[c][i][0], in[c][i][1], in[c][i][2]);
+            Vec3 o = v - dt * Vec3(sum(a[c][0]), sum(a[c][1]), sum(a[c][2]));
+            if (boundaryBlock) o += boundaryBlock[i] * v;
             out[c][i] = o;
         }
     }
@@ -48,65 +126,60 @@ void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Ma
 
 }  // namespace
 
-void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* x,
-                    const Vec3* in, Real dt, Vec3* out) {
-    const Vec3* const inputs[1] = {in};
+void toRows(std::size_t begin, std::size_t end, const Vec3* v, Row* rows) {
+    for (std::size_t i = begin; i < end; ++i) rows[i] = Row(v[i].x(), v[i].y(), v[i].z(), 0);
+}
+
+void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+                    const Row* in, Real dt, Vec3* out) {
+    const Row* const inputs[1] = {in};
     Vec3* const outputs[1] = {out};
     viscousProductsOf<1>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
 }
 
-void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* x,
-                     const Vec3* in1, const Vec3* in2, Real dt, Vec3* out1, Vec3* out2) {
-    const Vec3* const inputs[2] = {in1, in2};
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+                     const Row* in1, const Row* in2, Real dt, Vec3* out1, Vec3* out2) {
+    const Row* const inputs[2] = {in1, in2};
     Vec3* const outputs[2] = {out1, out2};
     viscousProductsOf<2>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
 }
 
+// The pressure sweeps take one pair per vector, its lanes the coordinates, and add the lanes only at the end: their
+// pairs need no sum over coordinates in between (the viscous product's do, hence its groups of four pairs).
 void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Real* bodyRate,
-                 const Vec3* xv, const Vec3* uv, Real* rate) {
-    const Real* x = raw(xv);
-    const Real* u = raw(uv);
+                 const Row* x, const Row* u, Real* rate) {
     const std::uint64_t* off = fluid.list->offsets.data();
     const std::uint32_t* idx = fluid.list->indices.data();
-    const Real* w = fluid.weight;
     for (std::size_t i = begin; i < end; ++i) {
-        const Real xi0 = x[3 * i], xi1 = x[3 * i + 1], xi2 = x[3 * i + 2];
-        const Real ui0 = u[3 * i], ui1 = u[3 * i + 1], ui2 = u[3 * i + 2];
-        Real r = 0;
+        const Lanes xi = load(x[i]), ui = load(u[i]);
+        Lanes a = zero();  // the fourth lane stays zero: the rows' fourth values are
         for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
-            const std::size_t j = 3 * std::size_t(idx[p]);
-            r += w[p] * ((ui0 - u[j]) * (xi0 - x[j]) + (ui1 - u[j + 1]) * (xi1 - x[j + 1]) +
-                         (ui2 - u[j + 2]) * (xi2 - x[j + 2]));
+            const std::uint32_t j = idx[p];
+            a = a + broadcast(fluid.weight[p]) * ((ui - load(u[j])) * (xi - load(x[j])));
         }
-        if (boundarySum) r += ui0 * boundarySum[i].x() + ui1 * boundarySum[i].y() + ui2 * boundarySum[i].z();
+        const Row l = row(a);
+        Real r = (l[0] + l[1]) + l[2];
+        if (boundarySum) r += (u[i][0] * boundarySum[i].x() + u[i][1] * boundarySum[i].y()) + u[i][2] * boundarySum[i].z();
         if (bodyRate) r -= bodyRate[i];
         rate[i] = r;
     }
 }
 
-void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Vec3* xv,
+void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Row* x,
                     const Real* s, Real dt, Vec3* dv) {
-    const Real* x = raw(xv);
     const std::uint64_t* off = fluid.list->offsets.data();
     const std::uint32_t* idx = fluid.list->indices.data();
-    const Real* w = fluid.weight;
     for (std::size_t i = begin; i < end; ++i) {
-        const Real xi0 = x[3 * i], xi1 = x[3 * i + 1], xi2 = x[3 * i + 2];
-        const Real si = s[i];
-        Real a0 = 0, a1 = 0, a2 = 0;
+        const Lanes xi = load(x[i]), si = broadcast(s[i]);
+        Lanes a = zero();
         for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
             const std::uint32_t j = idx[p];
-            const Real c = w[p] * (si + s[j]);
-            a0 += c * (xi0 - x[3 * std::size_t(j)]);
-            a1 += c * (xi1 - x[3 * std::size_t(j) + 1]);
-            a2 += c * (xi2 - x[3 * std::size_t(j) + 2]);
+            a = a + (broadcast(fluid.weight[p]) * (si + broadcast(s[j]))) * (xi - load(x[j]));
         }
-        if (boundarySum) {
-            a0 += si * boundarySum[i].x();
-            a1 += si * boundarySum[i].y();
-            a2 += si * boundarySum[i].z();
-        }
-        dv[i] = Vec3(-dt * a0, -dt * a1, -dt * a2);
+        const Row l = row(a);
+        Vec3 sum(l[0], l[1], l[2]);
+        if (boundarySum) sum += s[i] * boundarySum[i];
+        dv[i] = -dt * sum;
     }
 }
 

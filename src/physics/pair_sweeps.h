@@ -1,17 +1,28 @@
 #pragma once
-// The sweeps over neighbour pairs that every solver iteration makes, as tight scalar loops over plain arrays
-// (pair_sweeps.cpp is compiled with reassociation allowed and without SIMD; see src/CMakeLists.txt). Each pair's
-// geometry is computed once per step: the solvers pass per-pair weights in the order of the neighbour lists, and the
-// sweeps only combine them with the current vectors. The boundary stands still during a solve and its particles carry
-// no unknowns, so it enters as one sum per fluid particle, taken once a step, instead of its pairs. A particle's sum
-// is always taken in the same order, so results do not depend on the thread count.
+// The sweeps over neighbour pairs that every solver iteration makes. Each pair's geometry is computed once per step:
+// the solvers pass per-pair weights in the order of the neighbour lists, and the sweeps only combine them with the
+// current vectors. The boundary stands still during a solve and its particles carry no unknowns, so it enters as one
+// sum per fluid particle, taken once a step, instead of its pairs.
+//
+// The sweeps read positions and inputs as Rows (four doubles, 32-byte aligned), four pairs at a time: one aligned load
+// per neighbour brings its row, and four rows transposed give one vector per coordinate (with AVX2, the instruction
+// set of the default build; elsewhere the same four lanes in plain C++, which round alike, so that both builds give
+// the same bytes). A particle's sum is always taken in the same order, so results do not depend on the thread count.
 
 #include "core/neighbour_search.h"
 #include "core/types.h"
 
 #include <cstddef>
+#include <vector>
 
 namespace ganache::sweeps {
+
+/// A particle's three components and a zero.
+using Row = Eigen::Matrix<Real, 4, 1>;
+using Rows = std::vector<Row>;
+
+/// rows[i] = (v_i, 0) for i in [begin, end).
+void toRows(std::size_t begin, std::size_t end, const Vec3* v, Row* rows);
 
 /// One neighbour list with a weight per pair (nullptr: the list takes no part).
 struct Pairs {
@@ -23,22 +34,22 @@ struct Pairs {
 /// (I - dt A) in of the implicit viscosity [WKBB18 Eq. 7-11] with the bodies' velocities left out. B_i =
 /// -dt sum_q kb_q x_ik x_ik^T is the boundary's part of particle i's diagonal block, summed once a step: the boundary
 /// stands still during a solve (boundaryBlock null: no boundary).
-void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* x,
-                    const Vec3* in, Real dt, Vec3* out);
+void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+                    const Row* in, Real dt, Vec3* out);
 
 /// viscousProduct for two inputs at once (one pass over the pairs): out1 = (I - dt A) in1, out2 = (I - dt A) in2.
-void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Vec3* x,
-                     const Vec3* in1, const Vec3* in2, Real dt, Vec3* out1, Vec3* out2);
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+                     const Row* in1, const Row* in2, Real dt, Vec3* out1, Vec3* out2);
 
 /// For i in [begin, end): rate_i = sum_p w_p (u_i - u_j) . x_ij + u_i . S_i - c_i, a density rate Drho/Dt with
 /// w_p = m_j g_p, S_i = sum_q wb_q x_ik the boundary's weights summed once a step and c_i = sum_q wb_q ub_k . x_ik the
 /// bodies' velocities' share (boundarySum, bodyRate null: none).
 void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Real* bodyRate,
-                 const Vec3* x, const Vec3* u, Real* rate);
+                 const Row* x, const Row* u, Real* rate);
 
 /// For i in [begin, end): dv_i = -dt (sum_p w_p (s_i + s_j) x_ij + s_i S_i), the velocity change of the pressures s
 /// [BK17], S_i as for densityRate.
-void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Vec3* x,
+void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Row* x,
                     const Real* s, Real dt, Vec3* dv);
 
 }  // namespace ganache::sweeps

@@ -2,7 +2,6 @@
 
 #include "core/attributes.h"
 #include "core/parallel.h"
-#include "physics/pair_sweeps.h"
 
 #include <fmt/format.h>
 
@@ -42,11 +41,17 @@ PressureDFSPH::PressureDFSPH(const PressureSettings& settings, ParticleSet& part
     : m_settings(settings), m_pressure(&particles.add(attribute::kPressureWarmStart)) {}
 
 void PressureDFSPH::rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u,
-                          bool withBodies, std::vector<Real>& out) const {
-    out.resize(particles.size());
-    forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
+                          bool withBodies, std::vector<Real>& out) {
+    const std::size_t n = particles.size();
+    out.resize(n);
+    m_velocityRows.resize(n);
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        sweeps::toRows(begin, end, u.data(), m_velocityRows.data());
+    });
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         sweeps::densityRate(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
-                            withBodies ? m_bodyRate.data() : nullptr, particles.x().data(), u.data(), out.data());
+                            withBodies ? m_bodyRate.data() : nullptr, m_positionRows.data(), m_velocityRows.data(),
+                            out.data());
     });
 }
 
@@ -55,7 +60,7 @@ void PressureDFSPH::velocityChanges(const StepContext& ctx, const ParticleSet& p
     out.resize(particles.size());
     forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::pressureChange(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
-                               particles.x().data(), s.data(), ctx.dt, out.data());
+                               m_positionRows.data(), s.data(), ctx.dt, out.data());
     });
 }
 
@@ -71,7 +76,9 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     m_boundaryWeights.resize(b.pairs());
     m_boundarySum.resize(n);
     m_bodyRate.resize(n);
+    m_positionRows.resize(n);
     forEachParticle(n, [&](std::size_t i) {
+        m_positionRows[i] = sweeps::Row(x[i].x(), x[i].y(), x[i].z(), 0);
         Vec3 sum = Vec3::Zero();
         Real squares = 0;
         for (std::size_t p = f.first(i); p < f.last(i); ++p) {

@@ -2,6 +2,7 @@
 // Divergence-free SPH pressure solves (Bender & Koschier 2017, "Divergence-Free SPH for Incompressible and
 // Viscous Fluids", IEEE TVCG 23(3)), with boundaries after Akinci et al. 2012.
 
+#include "physics/pair_sweeps.h"
 #include "physics/simulation.h"
 
 namespace ganache {
@@ -44,7 +45,7 @@ private:
     // Drho/Dt of every particle for the velocities u, with the bodies' own velocities when withBodies (the
     // system's product leaves them out).
     void rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u, bool withBodies,
-               std::vector<Real>& out) const;
+               std::vector<Real>& out);
     // -dt (sum_j m_j (s_i + s_j) grad W_ij + kWall sum_k Psi_k s_i grad W_ik): every particle's velocity change from
     // the pressures s (kappa / rho); the boundary mirrors the particle's own pressure [AIA+12, BK17].
     void velocityChanges(const StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s,
@@ -69,6 +70,8 @@ private:
     // Scratch of the solvers, kept between steps.
     std::vector<Real> m_error, m_direction, m_product, m_change, m_residual, m_rate;
     std::vector<Vec3> m_velocityChange;
+    // The sweeps' rows: the positions (taken with the factors) and a rate's velocities.
+    sweeps::Rows m_positionRows, m_velocityRows;
 };
 
 }  // namespace ganache

@@ -2,7 +2,6 @@
 
 #include "core/attributes.h"
 #include "core/parallel.h"
-#include "physics/pair_sweeps.h"
 
 #include <algorithm>
 #include <cmath>
@@ -59,12 +58,16 @@ ViscosityWeiler2018::ViscosityWeiler2018(const ViscosityParams& params, const Si
     : ViscosityMethod(params, setup, particles), m_rigidFlag(&particles.add(attribute::kViscouslyRigid)) {}
 
 Real ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
-                                   std::vector<Vec3>& out) const {
+                                   std::vector<Vec3>& out) {
     // (I - dt A) in, with the bodies' velocities on the right-hand side
+    m_inputRows.resize(particles.size());
+    forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
+        sweeps::toRows(begin, end, in.data(), m_inputRows.data());
+    });
     return deterministicBlockSum(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::viscousProduct(begin, end, {&ctx.fluidNeighbours, pairs().data()},
-                               sticky() ? m_boundaryBlock.data() : nullptr, particles.x().data(), in.data(), ctx.dt,
-                               out.data());
+                               sticky() ? m_boundaryBlock.data() : nullptr, m_positionRows.data(), m_inputRows.data(),
+                               ctx.dt, out.data());
         Real s = 0;
         for (std::size_t i = begin; i < end; ++i) s += in[i].dot(out[i]);
         return s;
@@ -153,10 +156,16 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     // The correction the solve has to make, b - M v, and the warm start's residual b - M out, from one sweep.
     m_start.resize(n);
     m_guess.resize(n);
+    for (auto* rows : {&m_positionRows, &m_inputRows, &m_inputRows2}) rows->resize(n);
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        sweeps::toRows(begin, end, x.data(), m_positionRows.data());
+        sweeps::toRows(begin, end, v.data(), m_inputRows.data());
+        sweeps::toRows(begin, end, out.data(), m_inputRows2.data());
+    });
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         sweeps::viscousProducts(begin, end, {&ctx.fluidNeighbours, pairs().data()},
-                                sticky() ? m_boundaryBlock.data() : nullptr, x.data(), v.data(), out.data(), dt,
-                                m_start.data(), m_guess.data());
+                                sticky() ? m_boundaryBlock.data() : nullptr, m_positionRows.data(),
+                                m_inputRows.data(), m_inputRows2.data(), dt, m_start.data(), m_guess.data());
     });
     ViscosityPass pass = m_cg.solve(system, precondition, m_b, v, m_start, m_guess, out, tolerance,
                                     std::size_t(m_params.maxIterations));

@@ -2,6 +2,7 @@
 // Implicit viscosity of Weiler, Koschier, Brand, Bender 2018: "A Physically Consistent Implicit Viscosity
 // Solver for SPH Fluids", Computer Graphics Forum 37(2). [WKBB18]
 
+#include "physics/pair_sweeps.h"
 #include "physics/viscosity/coarse_space.h"
 #include "physics/viscosity/viscosity.h"
 
@@ -27,7 +28,7 @@ protected:
 private:
     /// out = (I - dt A) in; returns in . out.
     Real multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
-                  std::vector<Vec3>& out) const;
+                  std::vector<Vec3>& out);
 
     std::vector<Real>* m_rigidFlag;  // attribute::kViscouslyRigid
     std::vector<Vec3> m_b;
@@ -36,6 +37,7 @@ private:
     std::vector<Mat3> m_boundaryBlock;  // -dt times the boundary part of each diagonal block, with boundary_mu > 0
     std::vector<std::uint32_t> m_nearBoundary;  // the particles with a boundary part
     std::vector<Vec3> m_start, m_guess;         // M v and M out before CG
+    sweeps::Rows m_positionRows, m_inputRows, m_inputRows2;  // the sweeps' rows: positions, one or two inputs
     RigidModes m_rigid;
     ClusterModes m_clusters;
     std::vector<std::uint8_t> m_group;  // each particle's group of clusters (see solve())
