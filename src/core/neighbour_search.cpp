@@ -6,8 +6,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
+
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
 
 namespace ganache {
 
@@ -33,6 +38,28 @@ std::uint64_t mortonKey(std::int64_t cx, std::int64_t cy, std::int64_t cz) {
 }
 
 std::uint64_t hashSlot(std::uint64_t key, int bits) { return (key * 0x9E3779B97F4A7C15ULL) >> (64 - bits); }
+
+// Bit b of the result: whether candidate b of the 64 from x, y, z lies closer than sqrt(r2) to (xi, yi, zi). The
+// arrays hold 64 values (past the last candidate, values too far for any test). The same squared distance in both
+// versions, so the same neighbours.
+std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Real yi, Real zi, Real r2) {
+    std::uint64_t bits = 0;
+#if defined(__AVX2__)
+    const __m256d px = _mm256_set1_pd(xi), py = _mm256_set1_pd(yi), pz = _mm256_set1_pd(zi), r = _mm256_set1_pd(r2);
+    for (int b = 0; b < 64; b += 4) {
+        const __m256d ex = _mm256_sub_pd(px, _mm256_loadu_pd(x + b)), ey = _mm256_sub_pd(py, _mm256_loadu_pd(y + b));
+        const __m256d ez = _mm256_sub_pd(pz, _mm256_loadu_pd(z + b));
+        const __m256d d2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
+        bits |= std::uint64_t(_mm256_movemask_pd(_mm256_cmp_pd(d2, r, _CMP_LT_OQ))) << b;
+    }
+#else
+    for (int b = 0; b < 64; ++b) {
+        const Real ex = xi - x[b], ey = yi - y[b], ez = zi - z[b];
+        bits |= std::uint64_t(ex * ex + ey * ey + ez * ez < r2) << b;
+    }
+#endif
+    return bits;
+}
 
 }  // namespace
 
@@ -148,7 +175,6 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     struct Candidates {
         std::vector<Real> x, y, z;
         std::vector<std::uint32_t> j;
-        std::vector<std::uint64_t> hit;
     };
     tbb::enumerable_thread_specific<Candidates> scratch;
 
@@ -189,8 +215,9 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
                             ++ranges;
                         }
                 const std::size_t words = (m + 63) / 64;
-                if (cand.j.size() < m)
-                    cand.x.resize(m), cand.y.resize(m), cand.z.resize(m), cand.j.resize(m), cand.hit.resize(m);
+                if (cand.j.size() < 64 * words)
+                    cand.x.resize(64 * words), cand.y.resize(64 * words), cand.z.resize(64 * words),
+                        cand.j.resize(64 * words);
                 // Cells hold a handful of points: plain loops beat memcpy calls here.
                 for (std::size_t r = 0, k = 0; r < std::size_t(ranges); ++r)
                     for (std::size_t s = from[r]; s < to[r]; ++s, ++k) {
@@ -199,29 +226,27 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
                         cand.z[k] = tz[s];
                         cand.j[k] = tSorted[s];
                     }
-                const Real* cx = cand.x.data();
-                const Real* cy = cand.y.data();
-                const Real* cz = cand.z.data();
+                // The last word's unused candidates lie too far for any test.
+                for (std::size_t k = m; k < 64 * words; ++k)
+                    cand.x[k] = cand.y[k] = cand.z[k] = std::numeric_limits<Real>::max();
                 const std::uint32_t* cj = cand.j.data();
-                std::uint64_t* hit = cand.hit.data();
                 for (std::size_t s = queryGrid.cellBegin(c); s < queryGrid.cellBegin(c + 1); ++s) {
                     const std::uint32_t i = qSorted[s];
                     const Real xi = queryX[i].x(), yi = queryX[i].y(), zi = queryX[i].z();
                     const std::uint32_t self = sameSet ? i : UINT32_MAX;
-                    // The distance test over all candidates (it vectorises), packed into one bit per candidate;
-                    // then only the neighbours are visited, in candidate order.
-                    for (std::size_t k = 0; k < m; ++k) {
-                        const Real ex = xi - cx[k], ey = yi - cy[k], ez = zi - cz[k];
-                        hit[k] = std::uint64_t(ex * ex + ey * ey + ez * ez < r2) & std::uint64_t(cj[k] != self);
-                    }
+                    // The distance test 64 candidates at a time, one bit each; then only the neighbours are
+                    // visited, in candidate order.
                     if (buffer.size() < used + m) buffer.resize(std::max(2 * buffer.size(), used + m));
                     std::uint32_t* dst = buffer.data() + used;
                     std::size_t found = 0;
                     for (std::size_t w = 0; w < words; ++w) {
-                        const std::size_t base = 64 * w, span = std::min<std::size_t>(64, m - base);
-                        std::uint64_t bits = 0;
-                        for (std::size_t b = 0; b < span; ++b) bits |= hit[base + b] << b;
-                        for (; bits; bits &= bits - 1) dst[found++] = cj[base + std::size_t(__builtin_ctzll(bits))];
+                        const std::size_t base = 64 * w;
+                        std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base,
+                                                      cand.z.data() + base, xi, yi, zi, r2);
+                        for (; bits; bits &= bits - 1) {
+                            const std::uint32_t j = cj[base + std::size_t(__builtin_ctzll(bits))];
+                            if (j != self) dst[found++] = j;
+                        }
                     }
                     chunkOf[i] = std::uint32_t(chunk);
                     localStart[i] = std::uint32_t(used);
