@@ -94,17 +94,6 @@ inline void forEachGroup(std::size_t i, Pairs fluid, const Row* const (&rows)[S]
     }
 }
 
-// sum_p term(p) for p in [first, last), in two sums with the pairs alternating between them: in one sum each addition
-// would wait on the one before.
-template <class Term>
-inline Lanes sumOfPairs(std::uint64_t first, std::uint64_t last, Term term) {
-    Lanes a0 = zero(), a1 = zero();
-    std::uint64_t p = first;
-    for (; p + 2 <= last; p += 2) a0 = a0 + term(p), a1 = a1 + term(p + 1);
-    if (p < last) a0 = a0 + term(p);
-    return a0 + a1;
-}
-
 // The viscous product for N inputs in one pass over the pairs (the pairs' geometry is read once for all of them).
 template <int N>
 void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
@@ -163,14 +152,14 @@ void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* bo
     const std::uint32_t* idx = fluid.list->indices.data();
     for (std::size_t i = begin; i < end; ++i) {
         const Lanes xi = load(x[i]), ui = load(u[i]);
-        // the fourth lanes stay zero: the rows' fourth values are
-        const Row l = row(sumOfPairs(off[i], off[i + 1], [&](std::uint64_t p) {
+        Lanes a = zero();  // the fourth lane stays zero: the rows' fourth values are
+        for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
             const std::uint32_t j = idx[p];
-            return broadcast(fluid.weight[p]) * ((ui - load(u[j])) * (xi - load(x[j])));
-        }));
+            a = a + broadcast(fluid.weight[p]) * ((ui - load(u[j])) * (xi - load(x[j])));
+        }
+        const Row l = row(a);
         Real r = (l[0] + l[1]) + l[2];
-        if (boundarySum)
-            r += (u[i][0] * boundarySum[i].x() + u[i][1] * boundarySum[i].y()) + u[i][2] * boundarySum[i].z();
+        if (boundarySum) r += (u[i][0] * boundarySum[i].x() + u[i][1] * boundarySum[i].y()) + u[i][2] * boundarySum[i].z();
         if (bodyRate) r -= bodyRate[i];
         rate[i] = r;
     }
@@ -182,10 +171,12 @@ void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3*
     const std::uint32_t* idx = fluid.list->indices.data();
     for (std::size_t i = begin; i < end; ++i) {
         const Lanes xi = load(x[i]), si = broadcast(s[i]);
-        const Row l = row(sumOfPairs(off[i], off[i + 1], [&](std::uint64_t p) {
+        Lanes a = zero();
+        for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
             const std::uint32_t j = idx[p];
-            return (broadcast(fluid.weight[p]) * (si + broadcast(s[j]))) * (xi - load(x[j]));
-        }));
+            a = a + (broadcast(fluid.weight[p]) * (si + broadcast(s[j]))) * (xi - load(x[j]));
+        }
+        const Row l = row(a);
         Vec3 sum(l[0], l[1], l[2]);
         if (boundarySum) sum += s[i] * boundarySum[i];
         dv[i] = -dt * sum;
