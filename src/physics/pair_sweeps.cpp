@@ -118,7 +118,11 @@ void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Ma
         for (int c = 0; c < N; ++c) {
             const Vec3 v(in[c][i][0], in[c][i][1], in[c][i][2]);
             Vec3 o = v - dt * Vec3(sum(a[c][0]), sum(a[c][1]), sum(a[c][2]));
-            if (boundaryBlock) o += boundaryBlock[i] * v;
+            if (boundaryBlock) {
+                // written out: Eigen's matrix product fuses multiply-adds where the target has them
+                const Mat3& b = boundaryBlock[i];
+                for (int r = 0; r < 3; ++r) o[r] += (b(r, 0) * v[0] + b(r, 1) * v[1]) + b(r, 2) * v[2];
+            }
             out[c][i] = o;
         }
     }
