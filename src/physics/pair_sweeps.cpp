@@ -10,8 +10,9 @@ namespace ganache::sweeps {
 
 namespace {
 
-// Four lanes of doubles: one lane per pair of a group of four. Gathering instructions were tried for the neighbours'
-// values and ran at half the speed of the scalar loops on AMD's cores; aligned row loads and a transpose do not.
+// Four lanes of doubles: a group of four pairs' values of one coordinate, or one pair's coordinates. Gathering
+// instructions were tried for the neighbours' values and ran at half the speed of the scalar loops on AMD's cores;
+// aligned row loads (and a transpose) do not.
 #if defined(__AVX2__)
 struct Lanes {
     __m256d v;

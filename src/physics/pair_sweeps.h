@@ -4,10 +4,11 @@
 // current vectors. The boundary stands still during a solve and its particles carry no unknowns, so it enters as one
 // sum per fluid particle, taken once a step, instead of its pairs.
 //
-// The sweeps read positions and inputs as Rows (four doubles, 32-byte aligned), four pairs at a time: one aligned load
-// per neighbour brings its row, and four rows transposed give one vector per coordinate (with AVX2, the instruction
-// set of the default build; elsewhere the same four lanes in plain C++, which round alike, so that both builds give
-// the same bytes). A particle's sum is always taken in the same order, so results do not depend on the thread count.
+// The sweeps read positions and inputs as Rows (four doubles, 32-byte aligned): one aligned load per neighbour brings
+// its row. The viscous product takes four pairs at a time, their rows transposed into one vector per coordinate; the
+// pressure sweeps one pair per vector, its lanes the coordinates. Vectors are AVX2's in the default build; elsewhere
+// the same four lanes in plain C++, which round alike, so that both builds give the same bytes. A particle's sum is
+// always taken in the same order, so results do not depend on the thread count.
 
 #include "core/neighbour_search.h"
 #include "core/types.h"
