@@ -49,7 +49,8 @@ std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Rea
     for (int b = 0; b < 64; b += 4) {
         const __m256d ex = _mm256_sub_pd(px, _mm256_loadu_pd(x + b)), ey = _mm256_sub_pd(py, _mm256_loadu_pd(y + b));
         const __m256d ez = _mm256_sub_pd(pz, _mm256_loadu_pd(z + b));
-        const __m256d d2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
+        const __m256d d2 =
+            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
         bits |= std::uint64_t(_mm256_movemask_pd(_mm256_cmp_pd(d2, r, _CMP_LT_OQ))) << b;
     }
 #else

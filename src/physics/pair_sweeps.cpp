@@ -75,8 +75,8 @@ inline Real sum(Lanes a) {
     return (l[0] + l[1]) + (l[2] + l[3]);
 }
 
-// Calls pair(c, k, rows) for each group of four of particle i's pairs: c[l] the neighbours' rows of `rows[s]` for
-// each source s, transposed, and k their weights. A tail's missing pairs are particle i itself with weight zero: a
+// Calls pair(c, k) for each group of four of particle i's pairs: c[s] the four neighbours' rows of `rows[s]`,
+// transposed (c[s][k]'s lanes are the neighbours' entries k), and k their weights. A tail's missing pairs are particle i itself with weight zero: a
 // pair of a particle with itself has x_ij = 0 and adds nothing.
 template <int S, class Pair>
 inline void forEachGroup(std::size_t i, Pairs fluid, const Row* const (&rows)[S], Pair pair) {
@@ -164,7 +164,8 @@ void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* bo
         }
         const Row l = row(a);
         Real r = (l[0] + l[1]) + l[2];
-        if (boundarySum) r += (u[i][0] * boundarySum[i].x() + u[i][1] * boundarySum[i].y()) + u[i][2] * boundarySum[i].z();
+        if (boundarySum)
+            r += (u[i][0] * boundarySum[i].x() + u[i][1] * boundarySum[i].y()) + u[i][2] * boundarySum[i].z();
         if (bodyRate) r -= bodyRate[i];
         rate[i] = r;
     }
@@ -182,9 +183,9 @@ void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3*
             a = a + (broadcast(fluid.weight[p]) * (si + broadcast(s[j]))) * (xi - load(x[j]));
         }
         const Row l = row(a);
-        Vec3 sum(l[0], l[1], l[2]);
-        if (boundarySum) sum += s[i] * boundarySum[i];
-        dv[i] = -dt * sum;
+        Vec3 total(l[0], l[1], l[2]);
+        if (boundarySum) total += s[i] * boundarySum[i];
+        dv[i] = -dt * total;
     }
 }
 

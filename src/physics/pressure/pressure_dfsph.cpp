@@ -78,7 +78,7 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     m_bodyRate.resize(n);
     m_positionRows.resize(n);
     forEachParticle(n, [&](std::size_t i) {
-        m_positionRows[i] = sweeps::Row(x[i].x(), x[i].y(), x[i].z(), 0);
+        sweeps::toRows(i, i + 1, x.data(), m_positionRows.data());
         Vec3 sum = Vec3::Zero();
         Real squares = 0;
         for (std::size_t p = f.first(i); p < f.last(i); ++p) {
