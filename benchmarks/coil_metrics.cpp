@@ -24,9 +24,9 @@
 // x^2 + z^2 + D x + E z + F = 0) its radius and centre. The turn is a circle when the points' RMS distance from that
 // circle is at most E times its radius (default 0.1); a rope that lays meanders or figures of eight turns a
 // revolution only over several loops, and the circle fitted to them says how wide the pile is, not how wide a coil.
-// Over the window the summary then counts the frames whose newest turn is a circle and gives their mean radius, its
-// coefficient of variation and the coiling frequency: the emitter's rate (ids a second, from the frames) over the ids
-// one turn took.
+// Over the window the summary then gives the turns' mean radius and its coefficient of variation, the same for the
+// turns that are circles, and the coiling frequency: the emitter's rate (ids a second, from the frames) over the ids a
+// circular turn took.
 
 #include "io/particle_cache.h"
 #include "tool_args.h"
@@ -144,6 +144,12 @@ Touchdown touchdown(const CacheContents& cache, const Options& o) {
     return t;
 }
 
+// Mean and coefficient of variation (standard deviation over mean) of n values from their sum and sum of squares.
+std::pair<Real, Real> meanAndVariation(Real sum, Real squares, std::size_t n) {
+    const Real mean = sum / Real(n);
+    return {mean, std::sqrt(std::max<Real>(squares / Real(n) - mean * mean, 0)) / mean};
+}
+
 // The summary of the touchdowns about the coil's centre (without --turn).
 std::string touchdowns(const std::vector<Touchdown>& frames, Real from, Real to) {
     Real sum = 0, squares = 0, turned = 0, widest = 0, first = 0;
@@ -166,8 +172,7 @@ std::string touchdowns(const std::vector<Touchdown>& frames, Real from, Real to)
         previous = &t;
     }
     if (n < 2) throw std::runtime_error("fewer than two frames with laid rope in the window");
-    const Real mean = sum / Real(n);
-    const Real cv = std::sqrt(std::max<Real>(squares / Real(n) - mean * mean, 0)) / mean;
+    const auto [mean, cv] = meanAndVariation(sum, squares, n);
     const Real span = previous->time - first;
     // Frames a quarter of a revolution or more apart may miss turns (aliasing): no frequency then.
     const std::string frequency =
@@ -177,7 +182,8 @@ std::string touchdowns(const std::vector<Touchdown>& frames, Real from, Real to)
                        n, mean, cv, frequency, rows);
 }
 
-// The summary of the newest turns (--turn): the circles' radius, its variation and the coiling frequency.
+// The summary of the newest turns (--turn): their radius and its variation, and the same for the turns that are
+// circles, with the coiling frequency.
 std::string newestTurns(const std::vector<Touchdown>& frames, const Options& o, Real from, Real to) {
     // The emitter's rate from the frames in which ids grew: after the emitter stops they no longer do.
     Real emitted = 0, emitting = 0;
@@ -186,7 +192,7 @@ std::string newestTurns(const std::vector<Touchdown>& frames, const Options& o, 
             emitted += Real(frames[k].newestId - frames[k - 1].newestId);
             emitting += frames[k].time - frames[k - 1].time;
         }
-    Real sum = 0, squares = 0, ids = 0;
+    Real sum = 0, squares = 0, circleSum = 0, circleSquares = 0, ids = 0;
     std::size_t inWindow = 0, turns = 0, circles = 0;
     std::string rows;
     for (const Touchdown& t : frames) {
@@ -197,21 +203,25 @@ std::string newestTurns(const std::vector<Touchdown>& frames, const Options& o, 
         ++inWindow;
         if (t.turnIds == 0) continue;
         ++turns;
+        sum += t.radius, squares += t.radius * t.radius;
         if (t.misfit > o.circle) continue;
         ++circles;
-        sum += t.radius, squares += t.radius * t.radius, ids += Real(t.turnIds);
+        circleSum += t.radius, circleSquares += t.radius * t.radius, ids += Real(t.turnIds);
     }
     const Real rate = emitting > 0 ? emitted / emitting : 0;
-    std::string radius = "null", cv = "null", frequency = "null";
-    if (circles > 0) {
-        const Real mean = sum / Real(circles);
-        radius = fmt::format("{:.5f}", mean);
-        cv = fmt::format("{:.4f}", std::sqrt(std::max<Real>(squares / Real(circles) - mean * mean, 0)) / mean);
-        if (rate > 0) frequency = fmt::format("{:.3f}", rate / (ids / Real(circles)));
-    }
-    return fmt::format("{{\"frames_in_window\": {}, \"turns\": {}, \"circles\": {}, \"circle_radius\": {}, "
-                       "\"circle_radius_cv\": {}, \"emitted_per_s\": {:.0f}, \"frequency_hz\": {},\n  \"frames\": [\n    {}]}}\n",
-                       inWindow, turns, circles, radius, cv, rate, frequency, rows);
+    // "null" where there is nothing to measure
+    const auto summary = [](Real s, Real q, std::size_t n) {
+        if (n == 0) return std::string("null, null");
+        const auto [mean, cv] = meanAndVariation(s, q, n);
+        return fmt::format("{:.5f}, {:.4f}", mean, cv);
+    };
+    const std::string frequency =
+        circles > 0 && rate > 0 ? fmt::format("{:.3f}", rate / (ids / Real(circles))) : "null";
+    return fmt::format("{{\"frames_in_window\": {}, \"turns\": {}, \"turn_radius_and_cv\": [{}], \"circles\": {}, "
+                       "\"circle_radius_and_cv\": [{}], \"emitted_per_s\": {:.0f}, \"frequency_hz\": {},\n"
+                       "  \"frames\": [\n    {}]}}\n",
+                       inWindow, turns, summary(sum, squares, turns), circles,
+                       summary(circleSum, circleSquares, circles), rate, frequency, rows);
 }
 
 }  // namespace
