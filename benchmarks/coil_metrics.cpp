@@ -64,6 +64,11 @@ struct Options {
     std::size_t window = 64;
 };
 
+// Whether particle i has come to rest on the pile: slower than SPEED below HEIGHT.
+bool laid(const ParticleSet& p, std::size_t i, const Options& o) {
+    return p.v()[i].norm() < o.slow && p.x()[i].y() < o.below;
+}
+
 // The newest laid turn (see --turn above): its radius and angle about the fitted centre, misfit and ids in t.
 void fitNewestTurn(const ParticleSet& p, const Options& o, Touchdown& t) {
     std::vector<Vec3> line;  // newest first
@@ -71,7 +76,7 @@ void fitNewestTurn(const ParticleSet& p, const Options& o, Touchdown& t) {
     Vec3 sum = Vec3::Zero();
     std::size_t k = 0;
     for (std::size_t i = p.size(); i-- > 0;)
-        if (p.v()[i].norm() < o.slow && p.x()[i].y() < o.below) {
+        if (laid(p, i, o)) {
             sum += p.x()[i];
             if (++k == o.turn) line.push_back(sum / Real(k)), oldest.push_back(p.id()[i]), sum.setZero(), k = 0;
         }
@@ -113,7 +118,7 @@ Touchdown touchdown(const CacheContents& cache, const Options& o) {
     Vec3 c = Vec3::Zero(), pile = Vec3::Zero();
     std::size_t n = 0;
     for (std::size_t i = p.size(); i-- > 0;)
-        if (p.v()[i].norm() < o.slow && p.x()[i].y() < o.below) {
+        if (laid(p, i, o)) {
             if (n < o.window) c += p.x()[i], ++n;
             pile += p.x()[i];
             ++t.laid;
@@ -261,6 +266,9 @@ int main(int argc, char** argv) {
             }
         }
         if (files.empty()) throw std::runtime_error("no particle cache given");
+        bool circleGiven = false;
+        for (int a = 1; a < argc; ++a) circleGiven |= std::string(argv[a]) == "--circle";
+        if (circleGiven && o.turn == 0) throw std::runtime_error("--circle applies to --turn N; give --turn as well");
         std::vector<Touchdown> frames;
         for (const auto& f : files) frames.push_back(touchdown(readParticleCache(f), o));
         std::cout << (o.turn > 0 ? newestTurns(frames, o, from, to) : touchdowns(frames, from, to));
