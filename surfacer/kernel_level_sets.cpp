@@ -334,11 +334,11 @@ openvdb::MaskGrid::Ptr bricksCrossed(const FloatGrid& coarse, float insideBelow,
     std::vector<std::vector<openvdb::Coord>> below(leaves.size());
     forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         // Per point of the leaf and the layer around it (index +1): 1 outside, 2 between, 4 inside.
-        LeafNeighbourhood values;
+        LeafNeighbourhood values(coarse.tree());
         std::uint8_t kind[10][10][10];
         for (std::size_t l = begin; l != end; ++l) {
             const openvdb::Coord o = leaves[l]->origin();
-            values.gather(coarse.tree(), *leaves[l]);
+            values.gather(*leaves[l]);
             unsigned seen = 0;
             for (int i = -1; i <= 8; ++i)
                 for (int j = -1; j <= 8; ++j)
@@ -431,10 +431,10 @@ void fieldToDistance(FloatGrid& field, Real voxel, Real halfBand) {
     const float band = float(halfBand * voxel), inv2h = float(0.5 / voxel);
     openvdb::tree::LeafManager<openvdb::FloatTree> leaves(field.tree(), 1);
     forEachBlock(leaves.leafCount(), [&](std::size_t begin, std::size_t end) {
-        LeafNeighbourhood g;  // inactive points read NaN: no value there
+        LeafNeighbourhood g(field.tree());  // inactive points read NaN: no value there
         for (std::size_t l = begin; l != end; ++l) {
             const FloatLeaf& leaf = leaves.leaf(l);
-            g.gather(field.tree(), leaf, true);
+            g.gather(leaf, true);
             float* out = leaves.getBuffer(l, 1).data();
             const float* in = leaf.buffer().data();
             for (int n = 0; n < 512; ++n) out[n] = in[n] < 0 ? -band : band;

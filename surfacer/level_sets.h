@@ -15,12 +15,18 @@ using FloatLeaf = openvdb::FloatTree::LeafNodeType;
 /// A leaf's values and one layer of its neighbours' around it, read once so that stencils need no tree lookups.
 class LeafNeighbourhood {
 public:
+    /// Reads leaves of `tree`, whose topology must not change while this is in use.
+    explicit LeafNeighbourhood(const openvdb::FloatTree& tree) : m_tree(tree) {}
     /// Points outside the tree's leaves take its tiles' values; with inactiveAsNaN, every inactive point reads NaN.
-    void gather(const openvdb::FloatTree& tree, const FloatLeaf& leaf, bool inactiveAsNaN = false);
+    void gather(const FloatLeaf& leaf, bool inactiveAsNaN = false);
     /// The value at (i, j, k) of the leaf, each in -1..8.
     float operator()(int i, int j, int k) const { return m_values[i + 1][j + 1][k + 1]; }
+    /// The row along z at (i, j), each in -1..8: its ten values from k = -1 to 8.
+    const float* row(int i, int j) const { return m_values[i + 1][j + 1]; }
 
 private:
+    // Unregistered: one per task, so that finding the 26 neighbours goes through cached nodes, not from the root.
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> m_tree;
     float m_values[10][10][10];
 };
 
