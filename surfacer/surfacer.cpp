@@ -50,24 +50,30 @@ void initialiseOpenVdb() {
 // rest reads as inside or outside by flood fill.
 void trimToBand(FloatGrid& grid) {
     grid.tree().voxelizeActiveTiles();
-    openvdb::MaskGrid::Ptr band = openvdb::MaskGrid::create();
-    band->tree().topologyUnion(grid.tree());
-    openvdb::tree::LeafManager<openvdb::MaskTree> leaves(band->tree());
-    leaves.foreach([&](openvdb::MaskTree::LeafNodeType& leaf, std::size_t) {
-        const auto acc = grid.getConstAccessor();
-        for (auto it = leaf.cbeginValueOn(); it; ++it) {
-            const openvdb::Coord ijk = it.getCoord();
-            const bool inside = acc.getValue(ijk) < 0;
-            bool crossing = false;
-            for (int axis = 0; axis < 3 && !crossing; ++axis)
-                for (int side : {-1, 1}) {
-                    openvdb::Coord n = ijk;
-                    n[axis] += side;
-                    crossing = crossing || (acc.getValue(n) < 0) != inside;
-                }
-            if (!crossing) leaf.setValueOff(it.pos());
+    std::vector<const surfacing::FloatLeaf*> leaves;
+    grid.tree().getNodes(leaves);
+    using MaskLeaf = openvdb::MaskTree::LeafNodeType;
+    std::vector<MaskLeaf*> crossed(leaves.size(), nullptr);
+    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
+        surfacing::LeafNeighbourhood at(grid.tree());  // a leaf and its neighbours' faces, read once
+        for (std::size_t l = begin; l != end; ++l) {
+            at.gather(*leaves[l]);
+            auto* mask = new MaskLeaf(leaves[l]->origin(), false);
+            for (auto it = leaves[l]->cbeginValueOn(); it; ++it) {
+                const int i = int(it.pos() >> 6), j = int((it.pos() >> 3) & 7), k = int(it.pos() & 7);
+                const bool inside = at(i, j, k) < 0;
+                const bool crossing = (at(i - 1, j, k) < 0) != inside || (at(i + 1, j, k) < 0) != inside ||
+                                      (at(i, j - 1, k) < 0) != inside || (at(i, j + 1, k) < 0) != inside ||
+                                      (at(i, j, k - 1) < 0) != inside || (at(i, j, k + 1) < 0) != inside;
+                if (crossing) mask->setValueOn(it.pos());
+            }
+            if (mask->isEmpty()) delete mask;
+            else crossed[l] = mask;
         }
-    });
+    }, 16);
+    openvdb::MaskGrid::Ptr band = openvdb::MaskGrid::create();
+    for (MaskLeaf* leaf : crossed)
+        if (leaf) band->tree().addLeaf(leaf);
     openvdb::tools::dilateActiveValues(band->tree(), int(kHalfBand), openvdb::tools::NN_FACE_EDGE_VERTEX,
                                        openvdb::tools::IGNORE_TILES);
     grid.tree().topologyIntersection(band->tree());
