@@ -49,10 +49,13 @@ void LeafNeighbourhood::gather(const FloatLeaf& leaf, bool inactiveAsNaN) {
             };
             row[0] = value(0, start + 7);
             row[9] = value(2, start);
-            if (const float* inner = data[a][b][1]; inner && !inactiveAsNaN) {
+            if (const float* inner = data[a][b][1]; !inner) {
+                std::fill_n(row + 1, 8, tile[a][b][1]);
+            } else if (!inactiveAsNaN) {
                 for (int k = 0; k < 8; ++k) row[k + 1] = inner[start + openvdb::Index(k)];  // one vector copy
             } else {
-                for (int k = 0; k < 8; ++k) row[k + 1] = value(1, start + openvdb::Index(k));
+                const unsigned on = around[a][b][1]->getValueMask().getWord<std::uint8_t>(start >> 3);
+                for (int k = 0; k < 8; ++k) row[k + 1] = on >> k & 1u ? inner[start + openvdb::Index(k)] : NAN;
             }
         }
 }
