@@ -51,9 +51,10 @@ struct Ellipsoid {
 // Each particle's kernel from the spread of its neighbours within the support. The sums the spread needs are
 // taken in one pass over the 27 grid cells around the particle's own, without storing neighbour lists (which cost
 // as much again as the sums at 1M particles).
-// `grid` holds the particles in cells of the support.
-std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r, const UniformGrid& grid) {
+std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     const Real support = kKernelSupport * r, support2 = support * support, inverseCube = 1 / (support2 * support);
+    UniformGrid grid(support);
+    grid.build(x);
     const std::vector<Real>& sx = grid.sortedCoords(0);
     const std::vector<Real>& sy = grid.sortedCoords(1);
     const std::vector<Real>& sz = grid.sortedCoords(2);
@@ -143,11 +144,6 @@ struct KernelBins {
         for (std::size_t i = 0; i < kernels.size(); ++i)
             reach = reach.cwiseMax(kernels[i].extent), centres[i] = kernels[i].centre;
         grid.build(centres);
-    }
-    /// With `centres` already built from the kernels' centres in cells of 8 spacing.
-    KernelBins(const std::vector<Ellipsoid>& kernels, Real spacing, UniformGrid&& centres)
-        : h(spacing), grid(std::move(centres)) {
-        for (const Ellipsoid& e : kernels) reach = reach.cwiseMax(e.extent);
     }
 };
 
@@ -474,19 +470,12 @@ FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxe
     // particles and the next, unfilled one, i.e. where the lattice cells end, as for the other methods.
     const CubicSpline w(kKernelSupport * r);
     const Real interior = latticeKernelSum(2 * r, w) * 8 * r * r * r;
-    UniformGrid neighbourhoods(kKernelSupport * r);
-    neighbourhoods.build(x);
-    const std::vector<Ellipsoid> kernels = anisotropicKernels(x, r, neighbourhoods);
+    const std::vector<Ellipsoid> kernels = anisotropicKernels(x, r);
     const KernelBins coarseBins(kernels, 2 * voxel);
     const FloatGrid::Ptr coarse = kernelSum(kernels, coarseBins, leavesReached(coarseBins), r, 0.5 * interior);
     const std::vector<LatticeLeaf> fine =
         bricksNearSurface(*coarse, float((0.5 - kSeedHigh) * interior), float((0.5 - kSeedLow) * interior), halfBand);
-    // The fine lattice's bins are cells of eight voxels: at the default voxel, r / 2, the cells of the support that
-    // the kernels were found in, with the kernels' centres (the particles) already sorted into them.
-    const KernelBins fineBins = neighbourhoods.cellSize() == 8 * voxel
-                                    ? KernelBins(kernels, voxel, std::move(neighbourhoods))
-                                    : KernelBins(kernels, voxel);
-    const FloatGrid::Ptr field = kernelSum(kernels, fineBins, fine, r, 0.5 * interior);
+    const FloatGrid::Ptr field = kernelSum(kernels, KernelBins(kernels, voxel), fine, r, 0.5 * interior);
     fieldToDistance(*field, voxel, halfBand);
     field->setGridClass(openvdb::GRID_LEVEL_SET);
     return field;
