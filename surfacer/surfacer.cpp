@@ -53,12 +53,12 @@ void trimToBand(FloatGrid& grid) {
     std::vector<const surfacing::FloatLeaf*> leaves;
     grid.tree().getNodes(leaves);
     using MaskLeaf = openvdb::MaskTree::LeafNodeType;
-    std::vector<MaskLeaf*> crossed(leaves.size(), nullptr);
+    std::vector<std::unique_ptr<MaskLeaf>> crossed(leaves.size());
     forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         surfacing::LeafNeighbourhood at(grid.tree());  // a leaf and its neighbours' faces, read once
         for (std::size_t l = begin; l != end; ++l) {
             at.gather(*leaves[l]);
-            auto* mask = new MaskLeaf(leaves[l]->origin(), false);
+            auto mask = std::make_unique<MaskLeaf>(leaves[l]->origin(), false);
             for (auto it = leaves[l]->cbeginValueOn(); it; ++it) {
                 const int i = int(it.pos() >> 6), j = int((it.pos() >> 3) & 7), k = int(it.pos() & 7);
                 const bool inside = at(i, j, k) < 0;
@@ -67,13 +67,12 @@ void trimToBand(FloatGrid& grid) {
                                       (at(i, j, k - 1) < 0) != inside || (at(i, j, k + 1) < 0) != inside;
                 if (crossing) mask->setValueOn(it.pos());
             }
-            if (mask->isEmpty()) delete mask;
-            else crossed[l] = mask;
+            if (!mask->isEmpty()) crossed[l] = std::move(mask);
         }
     }, 16);
     openvdb::MaskGrid::Ptr band = openvdb::MaskGrid::create();
-    for (MaskLeaf* leaf : crossed)
-        if (leaf) band->tree().addLeaf(leaf);
+    for (auto& leaf : crossed)
+        if (leaf) band->tree().addLeaf(leaf.release());
     openvdb::tools::dilateActiveValues(band->tree(), int(kHalfBand), openvdb::tools::NN_FACE_EDGE_VERTEX,
                                        openvdb::tools::IGNORE_TILES);
     grid.tree().topologyIntersection(band->tree());
