@@ -45,7 +45,7 @@ struct SurfaceMesh {
 
 /// Wall time of each part of surfacing one frame [s].
 struct SurfaceTimings {
-    double levelSet = 0;    ///< particles to level set (for anisotropic: kernels, kernel sum, rebuild)
+    double levelSet = 0;    ///< particles to level set (for anisotropic: kernels, coarse and fine sums, distance)
     double smoothing = 0;   ///< mean-curvature filter
     double grids = 0;       ///< extra grids (density, temperature, vel)
     double mesh = 0;        ///< meshing, normals, per-vertex temperatures
