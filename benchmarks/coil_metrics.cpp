@@ -235,6 +235,7 @@ int main(int argc, char** argv) {
     Options o;
     Real from = -std::numeric_limits<Real>::infinity(), to = std::numeric_limits<Real>::infinity();
     std::vector<std::string> files;
+    bool circleGiven = false;
     try {
         for (int a = 1; a < argc; ++a) {
             const std::string arg = argv[a];
@@ -253,6 +254,7 @@ int main(int argc, char** argv) {
                 o.turn = std::size_t(std::max(1.0, value()));
             } else if (arg == "--circle") {
                 o.circle = value();
+                circleGiven = true;
             } else if (arg == "--window") {
                 o.window = std::size_t(std::max(1.0, value()));
             } else if (arg == "--from") {
@@ -266,8 +268,6 @@ int main(int argc, char** argv) {
             }
         }
         if (files.empty()) throw std::runtime_error("no particle cache given");
-        bool circleGiven = false;
-        for (int a = 1; a < argc; ++a) circleGiven |= std::string(argv[a]) == "--circle";
         if (circleGiven && o.turn == 0) throw std::runtime_error("--circle applies to --turn N; give --turn as well");
         std::vector<Touchdown> frames;
         for (const auto& f : files) frames.push_back(touchdown(readParticleCache(f), o));
