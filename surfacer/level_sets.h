@@ -5,6 +5,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -49,5 +50,10 @@ void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes);
 /// Moves the surface inward by `distance` [m] in equal moves of at most half a voxel, renormalising the band twice
 /// after each move (smoothing.cpp).
 void offsetLevelSet(openvdb::FloatGrid& grid, float distance);
+
+/// The mesh of the level set's zero crossing (contour.cpp): vertices in world space and triangles counter-clockwise
+/// seen from outside, closed and manifold; `adaptivity` in [0, 1] merges cells where the surface is flat (0: none).
+void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vector<Vec3>& points,
+                     std::vector<std::array<std::uint32_t, 3>>& triangles);
 
 }  // namespace ganache::surfacing

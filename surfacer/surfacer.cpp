@@ -14,7 +14,6 @@
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
-#include <openvdb/tools/VolumeToMesh.h>
 #include <openvdb/tree/LeafManager.h>
 
 #include <map>
@@ -145,21 +144,8 @@ typename GridT::Ptr attributeGrid(const FloatGrid& surface, const NearestParticl
 // --- meshing -----------------------------------------------------------------------------------------------
 
 SurfaceMesh meshOf(const FloatGrid& surface, Real adaptivity) {
-    std::vector<openvdb::Vec3s> points;
-    std::vector<openvdb::Vec3I> triangles;
-    std::vector<openvdb::Vec4I> quads;
-    openvdb::tools::volumeToMesh(surface, points, triangles, quads, 0.0, adaptivity);
     SurfaceMesh mesh;
-    mesh.points.reserve(points.size());
-    for (const auto& p : points) mesh.points.emplace_back(p.x(), p.y(), p.z());
-    mesh.triangles.reserve(triangles.size() + 2 * quads.size());
-    for (const auto& t : triangles) mesh.triangles.push_back({t[0], t[1], t[2]});
-    for (const auto& q : quads) {
-        mesh.triangles.push_back({q[0], q[1], q[2]});
-        mesh.triangles.push_back({q[0], q[2], q[3]});
-    }
-    // VolumeToMesh winds faces clockwise seen from outside; turn them counter-clockwise (OBJ's convention).
-    for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
+    surfacing::contourLevelSet(surface, adaptivity, mesh.points, mesh.triangles);
     mesh.normalsFromFaces();
     return mesh;
 }

@@ -15,7 +15,7 @@
 //    sum is taken only near the surface (found on a lattice of twice the voxel), and the signed distance comes
 //    from it directly (kernel_level_sets.cpp).
 // Then mean-curvature smoothing (smoothing.cpp: OpenVDB LevelSetFilter's flow on the leaves' buffers), and meshing
-// (OpenVDB VolumeToMesh).
+// (contour.cpp: dual contouring on the leaves' buffers, closed and manifold, flat areas merged per `adaptivity`).
 
 #include "core/particles.h"
 #include "scene/scene.h"
