@@ -66,7 +66,6 @@ void surface(benchmark::State& state) {
     SurfaceSettings settings;
     settings.requested = true;
     settings.method = method;
-    settings.adaptivity = defaultAdaptivity(method);
     SurfaceTimings sum;
     std::size_t triangles = 0, voxels = 0;
     resetPeakMemory();

@@ -28,7 +28,9 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <set>
+#include <stdexcept>
 
 namespace ganache::surfacing {
 
@@ -329,21 +331,23 @@ bool simpleDisk(const Values& values, const int origin[3], int h) {
 // The vertices of one leaf's cells: merging, then each kept patch's position.
 struct LeafVertices {
     std::vector<Vec3f> x;               // leaf index space
-    std::array<std::int32_t, 512> first;  // per cell: its first vertex, -1 where it has none
+    std::vector<std::pair<std::uint16_t, std::int32_t>> first;  // cells with vertices: the cell, its first vertex
 };
 
 void leafVertices(const Values& values, const Configs& configs, const openvdb::Coord& origin,
                   const FlippedFaces& flipped, float maxAngle, float maxDeviation, bool adapt, LeafVertices& out) {
+    const float cosMaxAngle = std::cos(maxAngle);
     // Level 0: the cells.
     std::array<Patch, 512> cells;
     for (int i = 0; i < kLeaf; ++i)
         for (int j = 0; j < kLeaf; ++j)
             for (int k = 0; k < kLeaf; ++k) {
                 Patch& patch = cells[std::size_t(blockIndex(0, i, j, k))];
-                const CellPieces pieces(configs(i, j, k), flipped, origin.offsetBy(i, j, k));
-                const int n = pieces.pieces->count;
+                const int config = configs(i, j, k);
                 patch.state = Patch::Empty;
-                if (n == 0) continue;
+                if (config == 0 || config == 255) continue;
+                const CellPieces pieces(config, flipped, origin.offsetBy(i, j, k));
+                const int n = pieces.pieces->count;
                 if (n > 1 || !adapt || pieces.pieces->ambiguous) {
                     patch.state = Patch::Several;
                     continue;
@@ -386,15 +390,17 @@ void leafVertices(const Values& values, const Configs& configs, const openvdb::C
                     const float length = normal.norm();
                     bool flat = length > 0;
                     if (flat) normal /= length;
-                    float spread = 0;
+                    // A child's normals lie within its spread of its own: the cone test in cosines, a cosine per
+                    // child that has merged already; the block's spread bounded by the widest child's.
+                    float nearest = 1, widest = 0;
                     for (const Patch* child : children) {
                         if (!flat || child->state != Patch::Single) continue;
-                        const float angle = std::acos(std::clamp(child->normal.dot(normal), -1.f, 1.f)) + child->spread;
-                        spread = std::max(spread, angle);
-                        flat = angle <= maxAngle;
+                        const float d = child->normal.dot(normal);
+                        flat = d >= (child->spread > 0 ? std::cos(maxAngle - child->spread) : cosMaxAngle);
+                        nearest = std::min(nearest, d), widest = std::max(widest, child->spread);
                     }
-                    const int origin[3] = {2 * bi * h, 2 * bj * h, 2 * bk * h};
-                    if (!flat || !simpleDisk(values, origin, h)) {
+                    const int corner[3] = {2 * bi * h, 2 * bj * h, 2 * bk * h};
+                    if (!flat || !simpleDisk(values, corner, h)) {
                         block.state = Patch::Several;
                         continue;
                     }
@@ -406,7 +412,7 @@ void leafVertices(const Values& values, const Configs& configs, const openvdb::C
                         const float g2 = g.squaredNorm();
                         if (g2 > 0) x -= value / g2 * g;
                         for (int a = 0; a < 3; ++a)
-                            x[a] = std::clamp(x[a], float(origin[a]), float(origin[a] + 2 * h));
+                            x[a] = std::clamp(x[a], float(corner[a]), float(corner[a] + 2 * h));
                     }
                     // Every cell's vertex close to the merged vertex's tangent plane.
                     const int size = 2 * h;
@@ -415,7 +421,7 @@ void leafVertices(const Values& values, const Configs& configs, const openvdb::C
                         for (int b = 0; b < size; ++b)
                             for (int c = 0; c < size; ++c) {
                                 const Patch& cell =
-                                    cells[std::size_t(blockIndex(0, origin[0] + a, origin[1] + b, origin[2] + c))];
+                                    cells[std::size_t(blockIndex(0, corner[0] + a, corner[1] + b, corner[2] + c))];
                                 if (cell.state == Patch::Single)
                                     deviation = std::max(deviation, std::abs(normal.dot(cell.x - x)));
                             }
@@ -423,12 +429,13 @@ void leafVertices(const Values& values, const Configs& configs, const openvdb::C
                         block.state = Patch::Several;
                         continue;
                     }
-                    block.x = x, block.normal = normal, block.spread = spread, block.weight = weight;
+                    block.x = x, block.normal = normal, block.weight = weight;
+                    block.spread = std::acos(std::clamp(nearest, -1.f, 1.f)) + widest;
                 }
     }
     // Numbering: the largest merged blocks first met in a depth-first walk, then the cells' own pieces.
     out.x.clear();
-    out.first.fill(-1);
+    out.first.clear();
     auto walk = [&](auto&& self, int level, int i, int j, int k) -> void {
         const Patch& patch = levels[level][blockIndex(level, i, j, k)];
         if (patch.state == Patch::Empty) return;
@@ -440,13 +447,13 @@ void leafVertices(const Values& values, const Configs& configs, const openvdb::C
                 for (int b = 0; b < size; ++b)
                     for (int c = 0; c < size; ++c) {
                         const int cell = blockIndex(0, i * size + a, j * size + b, k * size + c);
-                        if (cells[cell].state != Patch::Empty) out.first[cell] = id;
+                        if (cells[cell].state != Patch::Empty) out.first.emplace_back(std::uint16_t(cell), id);
                     }
             return;
         }
         if (level == 0) {
             const int cell = blockIndex(0, i, j, k);
-            out.first[cell] = std::int32_t(out.x.size());
+            out.first.emplace_back(std::uint16_t(cell), std::int32_t(out.x.size()));
             if (patch.state == Patch::Single) {
                 out.x.push_back(patch.x);
                 return;
@@ -500,48 +507,77 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     std::vector<const FloatLeaf*> leaves;
     leaves.reserve(tree.leafCount());
     for (auto it = tree.cbeginLeaf(); it; ++it) leaves.push_back(&*it);
+    // A cell is named by its first corner, which may lie in a tile below a leaf where the band is thinner than a
+    // voxel (a trimmed band, a thread): the leaves below the tree's that it lacks are stood in for by leaves of their
+    // tile's value, so that such cells get vertices too.
+    std::set<openvdb::Coord> below;
+    {
+        openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> access(tree);
+        for (const FloatLeaf* leaf : leaves)
+            for (int n = 1; n < 8; ++n) {
+                const openvdb::Coord o = leaf->origin().offsetBy(-kLeaf * cornerOffset(n, 0), -kLeaf * cornerOffset(n, 1),
+                                                                 -kLeaf * cornerOffset(n, 2));
+                if (!access.probeConstLeaf(o)) below.insert(o);
+            }
+    }
+    std::vector<std::unique_ptr<FloatLeaf>> standIns;
+    for (const openvdb::Coord& o : below) {
+        standIns.push_back(std::make_unique<FloatLeaf>(o, tree.getValue(o)));
+        leaves.push_back(standIns.back().get());
+    }
     const bool adapt = adaptivity > 0;
     const float maxAngle = float(std::acos(std::clamp(1 - adaptivity, Real(-1), Real(1))));
     const float maxDeviation = float(kDeviationPerAdaptivity * adaptivity);
 
-    // Faces where both cells would join the two crossings into one piece, each found by the cell above it.
+    // Vertices, leaf by leaf, with every face's rule as the table has it; each leaf notes the faces whose two cells
+    // would both join its two crossings (found by the cell above), and the few leaves next to such a face are done
+    // again once those faces are flipped.
     const auto& table = pieceTable();
-    std::vector<std::vector<std::pair<openvdb::Coord, int>>> tunnels(leaves.size());
-    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
-        LeafNeighbourhood at(tree);
-        for (std::size_t l = begin; l != end; ++l) {
-            at.gather(*leaves[l]);
-            const Configs configs(Values{at});
-            for (int i = 0; i < kLeaf; ++i)
-                for (int j = 0; j < kLeaf; ++j)
-                    for (int k = 0; k < kLeaf; ++k) {
-                        const int own = table[configs(i, j, k)].tunnels;
-                        if (!own) continue;
-                        for (int a = 0; a < 3; ++a) {
-                            int q[3] = {i, j, k};
-                            --q[a];
-                            if ((own >> 2 * a & 1) && (table[configs(q[0], q[1], q[2])].tunnels >> (2 * a + 1) & 1))
-                                tunnels[l].emplace_back(leaves[l]->origin().offsetBy(q[0], q[1], q[2]), a);
-                        }
-                    }
-        }
-    }, 16);
-    FlippedFaces flipped;
-    for (const auto& found : tunnels)
-        for (const auto& [below, axis] : found) flipped.add(below, axis);
-    tunnels = {};
-
-    // Vertices, leaf by leaf; then their numbers in leaf order.
     std::vector<LeafVertices> vertices(leaves.size());
+    std::vector<std::vector<std::pair<openvdb::Coord, int>>> tunnels(leaves.size());
+    const FlippedFaces none;
     forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         LeafNeighbourhood at(tree);
         for (std::size_t l = begin; l != end; ++l) {
             at.gather(*leaves[l]);
             const Values values{at};
+            const Configs configs(values);
+            const openvdb::Coord o = leaves[l]->origin();
+            leafVertices(values, configs, o, none, maxAngle, maxDeviation, adapt, vertices[l]);
+            for (int i = 0; i < kLeaf; ++i)
+                for (int j = 0; j < kLeaf; ++j)
+                    for (int k = 0; k < kLeaf; ++k) {
+                        const int own = table[std::size_t(configs(i, j, k))].tunnels;
+                        for (int a = 0; own && a < 3; ++a) {
+                            int q[3] = {i, j, k};
+                            --q[a];
+                            if ((own >> 2 * a & 1) &&
+                                (table[std::size_t(configs(q[0], q[1], q[2]))].tunnels >> (2 * a + 1) & 1))
+                                tunnels[l].emplace_back(o.offsetBy(q[0], q[1], q[2]), a);
+                        }
+                    }
+        }
+    }, 16);
+    FlippedFaces flipped;
+    std::set<openvdb::Coord> again;  // origins of the leaves next to a flipped face
+    for (const auto& found : tunnels)
+        for (const auto& [below, axis] : found) {
+            flipped.add(below, axis);
+            openvdb::Coord above = below;
+            above[axis] += 1;
+            again.insert(below & ~(kLeaf - 1)), again.insert(above & ~(kLeaf - 1));
+        }
+    tunnels = {};
+    if (!flipped.empty()) {
+        LeafNeighbourhood at(tree);
+        for (std::size_t l = 0; l < leaves.size(); ++l) {
+            if (!again.count(leaves[l]->origin())) continue;
+            at.gather(*leaves[l]);
+            const Values values{at};
             leafVertices(values, Configs(values), leaves[l]->origin(), flipped, maxAngle, maxDeviation, adapt,
                          vertices[l]);
         }
-    }, 16);
+    }
     std::vector<std::size_t> offset(leaves.size() + 1, 0);
     for (std::size_t l = 0; l < leaves.size(); ++l) offset[l + 1] = offset[l] + vertices[l].x.size();
     IdTree ids(-1);
@@ -556,9 +592,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
             if (v.x.empty()) continue;
             const openvdb::Coord o = leaves[l]->origin();
             IdLeaf* leaf = access.probeLeaf(o);
-            for (int c = 0; c < 512; ++c)
-                if (v.first[std::size_t(c)] >= 0)
-                    leaf->setValueOn(openvdb::Index(c), std::int32_t(offset[l]) + v.first[std::size_t(c)]);
+            for (const auto& [cell, first] : v.first) leaf->setValueOn(cell, std::int32_t(offset[l]) + first);
             for (std::size_t k = 0; k < v.x.size(); ++k) {
                 const openvdb::Vec3d w = transform.indexToWorld(
                     openvdb::Vec3d(o.x() + v.x[k].x(), o.y() + v.x[k].y(), o.z() + v.x[k].z()));
@@ -597,7 +631,10 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
                                 const CellPieces pieces(configs(q[0], q[1], q[2]), flipped,
                                                         leaves[l]->origin().offsetBy(q[0], q[1], q[2]));
                                 const int piece = pieces.pieces->piece[std::size_t(4 * a + around[n][0] + 2 * around[n][1])];
-                                vertex[n] = std::uint32_t(id(q[0], q[1], q[2]) + piece);
+                                const std::int32_t first = id(q[0], q[1], q[2]);
+                                if (first < 0)  // every crossed cell was given vertices above
+                                    throw std::logic_error("mesher: a crossed voxel cell has no vertex");
+                                vertex[n] = std::uint32_t(first + piece);
                             }
                             // Outward is +a where the edge starts inside.
                             if (!inside) std::swap(vertex[1], vertex[3]);

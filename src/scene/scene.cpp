@@ -330,7 +330,6 @@ const char* surfaceMethodName(SurfaceMethod method) {
     return "?";
 }
 
-Real defaultAdaptivity(SurfaceMethod method) { return method == SurfaceMethod::Spheres ? 0 : 0.1; }
 
 namespace {
 
@@ -348,7 +347,7 @@ SurfaceSettings readSurface(Section s, const Scene& scene) {
     out.smoothing = s.integer("smoothing", out.smoothing, 0, 50);
     out.mesh = s.boolean("mesh", out.mesh);
     out.meshPly = s.choice("mesh_format", "obj", {"obj", "ply"}) == "ply";
-    out.adaptivity = s.number("adaptivity", defaultAdaptivity(out.method), "", Bounds::closed(0, 1));
+    out.adaptivity = s.number("adaptivity", out.adaptivity, "", Bounds::closed(0, 1));
     Section grids = s.section("grids");
     out.densityGrid = grids.boolean("density", false);
     out.temperatureGrid = grids.boolean("temperature", false);

