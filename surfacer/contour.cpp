@@ -1,26 +1,26 @@
-// The mesh of a level set's zero crossing: dual contouring with a vertex per surface piece of each voxel cell (the
-// cell's crossed edges grouped as marching cubes would join them, so that the mesh stays closed and manifold),
-// then, within each 8^3 leaf, blocks of 2, 4 and 8 cells merged into one vertex where the surface through them is
-// a single flat enough disk.
+// The mesh of a level set's zero crossing: dual contouring with a vertex per surface piece of each voxel cell, then,
+// within each 8^3 leaf, blocks of 2, 4 and 8 cells merged into one vertex where the surface through them is a single
+// flat enough disk.
 //
 // A cell is the cube between eight voxel centres (corner n at offset (n & 1, n >> 1 & 1, n >> 2 & 1) from its first
-// corner, whose voxel names it); "inside" is a value below zero. Every crossed lattice edge gives a quad joining the
-// vertices of the four cells around it, collapsed to a triangle or dropped where merged cells share a vertex.
+// corner, whose voxel names it); "inside" is a value below zero. A cell's crossed edges are grouped into pieces as
+// marching cubes joins them, with one rule for faces whose four edges are crossed, so that the pieces of cells
+// that share a face meet consistently and the mesh is closed and manifold. Every crossed lattice edge gives a quad
+// joining the vertices of the four cells around it (collapsed to a triangle, or dropped, where merged cells share
+// a vertex); a cell's vertex is the mean of its piece's edge crossings.
 //
 // A block merges when (1) each of its eight children is empty or already one vertex; (2) the surface through it is
 // a disk that the block's eight corners alone describe: their configuration has one piece and no face with four
 // crossings, and the children's corners add no piece of their own (the sign at the middle of each block edge
 // agrees with one of the edge's ends, at the middle of each face with one of that face's edge middles, at the
-// centre with one of the face middles); (3) every normal of the children lies within acos(1 - adaptivity) of
-// their mean (the spread of merged children counted). The merged vertex is the children's mean moved onto the zero
-// crossing along the gradient; (4) every cell vertex of the block lies within 2 x adaptivity voxels of that
-// vertex's tangent plane.
+// centre with one of the face middles); (3) every normal of the children lies within acos(1 - adaptivity) of their
+// mean (the spread of merged children counted); (4) every cell vertex of the block lies within 2 x adaptivity
+// voxels of the tangent plane at the merged vertex: the children's mean moved onto the zero crossing along the
+// gradient.
 
 #include "surfacer/level_sets.h"
 
 #include "core/parallel.h"
-
-#include <openvdb/tree/LeafManager.h>
 
 #include <Eigen/Core>
 
@@ -149,9 +149,9 @@ const std::array<Pieces, 256>& pieceTable() {
 }
 
 // Faces whose rule is flipped, each named by the cell below it along its axis and the axis. Where two cells that share
-// a face both join its two crossings into one piece (a thread of the level set thinner than a voxel lying along
-// the face), each cell's one vertex would join the other's twice, and four quads would share an edge; flipping the
-// face's rule cuts the thread there instead.
+// a face both join its two crossings into one piece (a thread thinner than a voxel lying along the face, of air with
+// the default rule), each cell's one vertex would join the other's twice and four quads would share an edge;
+// flipping the face's rule cuts the thread there instead.
 class FlippedFaces {
 public:
     void add(const openvdb::Coord& below, int axis) { m_faces.insert(key(below, axis)); }
@@ -231,16 +231,12 @@ struct Values {
     }
 };
 
-// A cell's corner values and inside configuration.
+// A cell's corner values.
 struct Cell {
     float v[8];
-    int config = 0;
 
     Cell(const Values& values, int i, int j, int k) {
-        for (int n = 0; n < 8; ++n) {
-            v[n] = values(i + cornerOffset(n, 0), j + cornerOffset(n, 1), k + cornerOffset(n, 2));
-            config |= int(v[n] < 0) << n;
-        }
+        for (int n = 0; n < 8; ++n) v[n] = values(i + cornerOffset(n, 0), j + cornerOffset(n, 1), k + cornerOffset(n, 2));
     }
 
     // The vertex of piece p (relative to the cell's first corner): the mean of its edges' crossings, and its normal.
@@ -312,8 +308,7 @@ bool simpleDisk(const Values& values, const int origin[3], int h) {
         for (int b = 0; b < 3; ++b)
             for (int c = 0; c < 3; ++c) {
                 const int at[3] = {a, b, c};
-                const int middles = (a == 1) + (b == 1) + (c == 1);
-                if (middles == 0) continue;
+                if (a != 1 && b != 1 && c != 1) continue;  // a corner
                 bool agrees = false;
                 for (int axis = 0; axis < 3 && !agrees; ++axis) {
                     if (at[axis] != 1) continue;
@@ -510,18 +505,18 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     // A cell is named by its first corner, which may lie in a tile below a leaf where the band is thinner than a
     // voxel (a trimmed band, a thread): the leaves below the tree's that it lacks are stood in for by leaves of their
     // tile's value, so that such cells get vertices too.
-    std::set<openvdb::Coord> below;
+    std::set<openvdb::Coord> missing;
     {
         openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> access(tree);
         for (const FloatLeaf* leaf : leaves)
             for (int n = 1; n < 8; ++n) {
                 const openvdb::Coord o = leaf->origin().offsetBy(-kLeaf * cornerOffset(n, 0), -kLeaf * cornerOffset(n, 1),
                                                                  -kLeaf * cornerOffset(n, 2));
-                if (!access.probeConstLeaf(o)) below.insert(o);
+                if (!access.probeConstLeaf(o)) missing.insert(o);
             }
     }
     std::vector<std::unique_ptr<FloatLeaf>> standIns;
-    for (const openvdb::Coord& o : below) {
+    for (const openvdb::Coord& o : missing) {
         standIns.push_back(std::make_unique<FloatLeaf>(o, tree.getValue(o)));
         leaves.push_back(standIns.back().get());
     }
