@@ -236,7 +236,8 @@ struct Cell {
     float v[8];
 
     Cell(const Values& values, int i, int j, int k) {
-        for (int n = 0; n < 8; ++n) v[n] = values(i + cornerOffset(n, 0), j + cornerOffset(n, 1), k + cornerOffset(n, 2));
+        for (int n = 0; n < 8; ++n)
+            v[n] = values(i + cornerOffset(n, 0), j + cornerOffset(n, 1), k + cornerOffset(n, 2));
     }
 
     // The vertex of piece p (relative to the cell's first corner): the mean of its edges' crossings, and its normal.
@@ -348,7 +349,8 @@ void leafVertices(const Values& values, const Configs& configs, const openvdb::C
                     continue;
                 }
                 patch.state = Patch::Single;
-                patch.x = Cell(values, i, j, k).vertex(*pieces.pieces, 0, patch.normal) + Vec3f(float(i), float(j), float(k));
+                patch.x = Cell(values, i, j, k).vertex(*pieces.pieces, 0, patch.normal) +
+                          Vec3f(float(i), float(j), float(k));
                 patch.weight = 1;
                 patch.spread = 0;
                 if (patch.normal.isZero()) patch.state = Patch::Several;
@@ -364,7 +366,6 @@ void leafVertices(const Values& values, const Configs& configs, const openvdb::C
             for (int bj = 0; bj < n; ++bj)
                 for (int bk = 0; bk < n; ++bk) {
                     Patch& block = levels[level][blockIndex(level, bi, bj, bk)];
-                    block.state = Patch::Empty;
                     Patch* children[8];
                     bool several = false, any = false;
                     for (int c = 0; c < 8; ++c) {
@@ -510,8 +511,8 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
         openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> access(tree);
         for (const FloatLeaf* leaf : leaves)
             for (int n = 1; n < 8; ++n) {
-                const openvdb::Coord o = leaf->origin().offsetBy(-kLeaf * cornerOffset(n, 0), -kLeaf * cornerOffset(n, 1),
-                                                                 -kLeaf * cornerOffset(n, 2));
+                const openvdb::Coord o = leaf->origin().offsetBy(
+                    -kLeaf * cornerOffset(n, 0), -kLeaf * cornerOffset(n, 1), -kLeaf * cornerOffset(n, 2));
                 if (!access.probeConstLeaf(o)) missing.insert(o);
             }
     }
@@ -625,7 +626,8 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
                                 q[b] -= around[n][0], q[c] -= around[n][1];
                                 const CellPieces pieces(configs(q[0], q[1], q[2]), flipped,
                                                         leaves[l]->origin().offsetBy(q[0], q[1], q[2]));
-                                const int piece = pieces.pieces->piece[std::size_t(4 * a + around[n][0] + 2 * around[n][1])];
+                                const int edge = 4 * a + around[n][0] + 2 * around[n][1];
+                                const int piece = pieces.pieces->piece[std::size_t(edge)];
                                 const std::int32_t first = id(q[0], q[1], q[2]);
                                 if (first < 0)  // every crossed cell was given vertices above
                                     throw std::logic_error("mesher: a crossed voxel cell has no vertex");
