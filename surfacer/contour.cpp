@@ -507,17 +507,31 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     // voxel (a trimmed band, a thread): the leaves below the tree's that it lacks are stood in for by leaves of their
     // tile's value, so that such cells get vertices too.
     std::set<openvdb::Coord> missing;
-    {
-        openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> access(tree);
-        for (const FloatLeaf* leaf : leaves)
-            for (int n = 1; n < 8; ++n) {
-                const openvdb::Coord o = leaf->origin().offsetBy(
-                    -kLeaf * cornerOffset(n, 0), -kLeaf * cornerOffset(n, 1), -kLeaf * cornerOffset(n, 2));
-                if (!access.probeConstLeaf(o)) missing.insert(o);
-            }
-    }
+    openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> probe(tree);
+    for (const FloatLeaf* leaf : leaves)
+        for (int n = 1; n < 8; ++n) {
+            const openvdb::Coord o = leaf->origin().offsetBy(-kLeaf * cornerOffset(n, 0), -kLeaf * cornerOffset(n, 1),
+                                                             -kLeaf * cornerOffset(n, 2));
+            if (!probe.probeConstLeaf(o)) missing.insert(o);
+        }
     std::vector<std::unique_ptr<FloatLeaf>> standIns;
     for (const openvdb::Coord& o : missing) {
+        // Only where a voxel of the leaves above, next to this tile, lies on the other side of the surface.
+        const bool inside = tree.getValue(o) < 0;
+        bool crossed = false;
+        for (int n = 1; n < 8 && !crossed; ++n) {
+            const FloatLeaf* above = probe.probeConstLeaf(
+                o.offsetBy(kLeaf * cornerOffset(n, 0), kLeaf * cornerOffset(n, 1), kLeaf * cornerOffset(n, 2)));
+            if (!above) continue;
+            // Its voxels at local coordinate 0 along the axes it is offset on.
+            const int end[3] = {cornerOffset(n, 0) ? 1 : kLeaf, cornerOffset(n, 1) ? 1 : kLeaf,
+                                cornerOffset(n, 2) ? 1 : kLeaf};
+            for (int i = 0; i < end[0] && !crossed; ++i)
+                for (int j = 0; j < end[1] && !crossed; ++j)
+                    for (int k = 0; k < end[2] && !crossed; ++k)
+                        crossed = (above->getValue(openvdb::Index(i * 64 + j * 8 + k)) < 0) != inside;
+        }
+        if (!crossed) continue;
         standIns.push_back(std::make_unique<FloatLeaf>(o, tree.getValue(o)));
         leaves.push_back(standIns.back().get());
     }
