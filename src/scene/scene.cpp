@@ -330,7 +330,6 @@ const char* surfaceMethodName(SurfaceMethod method) {
     return "?";
 }
 
-
 namespace {
 
 SurfaceSettings readSurface(Section s, const Scene& scene) {
