@@ -292,14 +292,18 @@ Real SurfaceMesh::volume() const {
 }
 
 std::pair<std::size_t, std::size_t> SurfaceMesh::openAndNonManifoldEdges() const {
-    std::map<std::pair<std::uint32_t, std::uint32_t>, int> uses;
+    // Per edge (a < b): its uses from a to b and from b to a.
+    std::map<std::pair<std::uint32_t, std::uint32_t>, std::array<int, 2>> uses;
     for (const auto& t : triangles)
         for (int k = 0; k < 3; ++k) {
             const std::uint32_t a = t[k], b = t[(k + 1) % 3];
-            ++uses[{std::min(a, b), std::max(a, b)}];
+            ++uses[{std::min(a, b), std::max(a, b)}][a < b ? 0 : 1];
         }
     std::size_t open = 0, nonManifold = 0;
-    for (const auto& [edge, n] : uses) open += n == 1, nonManifold += n > 2;
+    for (const auto& [edge, n] : uses) {
+        open += n[0] + n[1] == 1;
+        nonManifold += n[0] + n[1] > 1 && (n[0] != 1 || n[1] != 1);
+    }
     return {open, nonManifold};
 }
 

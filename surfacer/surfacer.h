@@ -4,8 +4,8 @@
 //
 // Three ways to turn particles into a level set (scene key surface.method):
 //  - spheres: a sphere of 2.5 r around every particle, large enough to leave no bubble between disordered
-//    particles (their union's distance evaluated near the surface only), then moved inward by 1.36 r (OpenVDB's
-//    level-set offset) so that a flat layer's surface sits about r above its top particles (where the lattice
+//    particles (their union's distance evaluated near the surface only), then moved inward by 1.36 r (the
+//    level-set offset of smoothing.cpp) so that a flat layer's surface sits about r above its top particles (where the lattice
 //    cells end);
 //  - smooth_spheres: Zhu & Bridson 2005: distance to the weighted average of the neighbours within 2.7 r, less
 //    0.9 r, which fills the dips between spheres; evaluated only near the surface, like the anisotropic kernels;
@@ -39,7 +39,8 @@ struct SurfaceMesh {
     void normalsFromFaces();
     /// Enclosed volume (divergence theorem) [m^3]; meaningful for closed meshes.
     Real volume() const;
-    /// Edges used by exactly one triangle and by more than two; both zero for a closed manifold mesh.
+    /// Edges used by exactly one triangle, and edges used by more, but not by two in opposite directions; both zero
+    /// for a closed, manifold, consistently oriented mesh.
     std::pair<std::size_t, std::size_t> openAndNonManifoldEdges() const;
 };
 

@@ -1,36 +1,21 @@
 // The mesher (surfacer/contour.cpp) on level sets built voxel by voxel: the corners a particle frame reaches rarely.
 
 #include "surfacer/level_sets.h"
+#include "surfacer/surfacer.h"
 
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <cmath>
-#include <map>
 
 using namespace ganache;
 
 namespace {
 
-using Triangles = std::vector<std::array<std::uint32_t, 3>>;
-
-// Every edge of the mesh is used by exactly two triangles, once in each direction: closed, manifold along its
-// edges and consistently oriented.
-std::size_t badEdges(const Triangles& triangles) {
-    std::map<std::pair<std::uint32_t, std::uint32_t>, int> uses;  // +1 from a to b, +16 from b to a (a < b)
-    for (const auto& t : triangles)
-        for (int k = 0; k < 3; ++k) {
-            const std::uint32_t a = t[std::size_t(k)], b = t[std::size_t((k + 1) % 3)];
-            uses[{std::min(a, b), std::max(a, b)}] += a < b ? 1 : 16;
-        }
-    return std::size_t(std::count_if(uses.begin(), uses.end(), [](const auto& u) { return u.second != 17; }));
-}
-
-// Enclosed volume by the divergence theorem, in voxels^3 for a grid of unit voxels.
-Real volume(const std::vector<Vec3>& x, const Triangles& triangles) {
-    Real v = 0;
-    for (const auto& t : triangles) v += x[t[0]].dot(x[t[1]].cross(x[t[2]])) / 6;
-    return v;
+// The mesh of a level set (normals left out).
+SurfaceMesh contour(const openvdb::FloatGrid& grid, Real adaptivity) {
+    SurfaceMesh mesh;
+    surfacing::contourLevelSet(grid, adaptivity, mesh.points, mesh.triangles);
+    return mesh;
 }
 
 // A level set of unit voxels with `value` at every voxel of [lo, hi]^3 (inactive voxels elsewhere at +3).
@@ -58,13 +43,13 @@ TEST(Contour, AnAirThreadAlongACellFaceLeavesTheMeshManifold) {
         return float(std::max(p.norm() - 8, channel));
     });
     for (const Real adaptivity : {0.0, 0.1}) {
-        std::vector<Vec3> x;
-        Triangles triangles;
-        surfacing::contourLevelSet(*grid, adaptivity, x, triangles);
-        ASSERT_GT(triangles.size(), 500u);
-        EXPECT_EQ(badEdges(triangles), 0u) << "adaptivity " << adaptivity;
+        const SurfaceMesh mesh = contour(*grid, adaptivity);
+        ASSERT_GT(mesh.triangles.size(), 500u);
+        const auto [open, nonManifold] = mesh.openAndNonManifoldEdges();
+        EXPECT_EQ(open, 0u) << "adaptivity " << adaptivity;
+        EXPECT_EQ(nonManifold, 0u) << "adaptivity " << adaptivity;
         // The ball's volume less the channel's, within a few percent (the lattice's first-order crossings).
-        EXPECT_NEAR(volume(x, triangles) / (4 * M_PI / 3 * 512), 1.0, 0.05);
+        EXPECT_NEAR(mesh.volume() / (4 * M_PI / 3 * 512), 1.0, 0.05);
     }
 }
 
@@ -76,10 +61,10 @@ TEST(Contour, CellsWhoseFirstCornerLiesInATileGetVertices) {
         const Vec3 d = (p - Vec3::Constant(2.5)).cwiseAbs() - Vec3::Constant(3);
         return float(d.maxCoeff());
     });
-    std::vector<Vec3> x;
-    Triangles triangles;
-    surfacing::contourLevelSet(*grid, 0.0, x, triangles);
-    ASSERT_GT(triangles.size(), 100u);
-    EXPECT_EQ(badEdges(triangles), 0u);
-    EXPECT_GT(volume(x, triangles), 0);  // outward, counter-clockwise faces
+    const SurfaceMesh mesh = contour(*grid, 0.0);
+    ASSERT_GT(mesh.triangles.size(), 100u);
+    const auto [open, nonManifold] = mesh.openAndNonManifoldEdges();
+    EXPECT_EQ(open, 0u);
+    EXPECT_EQ(nonManifold, 0u);
+    EXPECT_GT(mesh.volume(), 0);  // outward, counter-clockwise faces
 }
