@@ -55,6 +55,7 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     const Real support = kKernelSupport * r, support2 = support * support, inverseCube = 1 / (support2 * support);
     UniformGrid grid(support);
     grid.build(x);
+    grid.releaseWorkingMemory();
     const std::vector<Real>& sx = grid.sortedCoords(0);
     const std::vector<Real>& sy = grid.sortedCoords(1);
     const std::vector<Real>& sz = grid.sortedCoords(2);
@@ -144,6 +145,7 @@ struct KernelBins {
         for (std::size_t i = 0; i < kernels.size(); ++i)
             reach = reach.cwiseMax(kernels[i].extent), centres[i] = kernels[i].centre;
         grid.build(centres);
+        grid.releaseWorkingMemory();
     }
 };
 

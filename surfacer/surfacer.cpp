@@ -94,7 +94,10 @@ FloatGrid::Ptr spheres(const std::vector<Vec3>& x, Real r, Real voxel) {
 
 class NearestParticle {
 public:
-    NearestParticle(const std::vector<Vec3>& x, Real cell) : m_x(x), m_grid(cell) { m_grid.build(x); }
+    NearestParticle(const std::vector<Vec3>& x, Real cell) : m_x(x), m_grid(cell) {
+        m_grid.build(x);
+        m_grid.releaseWorkingMemory();
+    }
     /// The index of the nearest particle within two cells, or -1.
     std::int64_t find(const Vec3& p) const {
         const Real cell = m_grid.cellSize();

@@ -2,13 +2,13 @@
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #if defined(__AVX2__)
 #include <immintrin.h>
@@ -64,6 +64,30 @@ std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Rea
 
 }  // namespace
 
+void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
+               std::vector<std::pair<std::uint64_t, std::uint32_t>>& scratch) {
+    // Least significant byte first, each pass stable, so that equal keys keep the order they came in; a byte in which
+    // every key agrees is skipped (a fluid's cells share most of their keys' high bits). The histograms of all bytes
+    // in one pass over the keys.
+    const std::size_t n = items.size();
+    if (n < 2) return;
+    std::uint64_t differ = 0;
+    for (const auto& item : items) differ |= item.first ^ items[0].first;
+    int bytes[8], active = 0;
+    for (int byte = 0; byte < 8; ++byte)
+        if (differ >> (8 * byte) & 0xff) bytes[active++] = 8 * byte;
+    std::array<std::array<std::uint32_t, 256>, 8> start{};
+    for (const auto& item : items)
+        for (int b = 0; b < active; ++b) ++start[std::size_t(b)][item.first >> bytes[b] & 0xff];
+    scratch.resize(n);
+    for (int b = 0; b < active; ++b) {
+        std::uint32_t total = 0;
+        for (auto& c : start[std::size_t(b)]) total += std::exchange(c, total);
+        for (const auto& item : items) scratch[start[std::size_t(b)][item.first >> bytes[b] & 0xff]++] = item;
+        items.swap(scratch);
+    }
+}
+
 UniformGrid::UniformGrid(Real cellSize) : m_cellSize(cellSize) {
     if (!(cellSize > 0) || !std::isfinite(cellSize))
         throw std::invalid_argument("UniformGrid: cell size must be positive and finite");
@@ -76,7 +100,7 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
 
     auto& keyed = m_keyed;
     keyed.resize(n);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
             const Vec3 c = (x[i] * inv).array().floor();
             if (!c.allFinite() || c.cwiseAbs().maxCoeff() > Real(kMaxCell))
@@ -87,8 +111,8 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
                         std::uint32_t(i)};
         }
     });
-    // (key, index) pairs are unique, so the sorted order is the same for any thread count.
-    tbb::parallel_sort(keyed.begin(), keyed.end());
+    // Indices ascend in keyed, so a stable sort by key gives the (key, index) order, the same for any thread count.
+    sortByKey(keyed, m_keyedScratch);
 
     m_sorted.resize(n);
     for (auto& c : m_sortedCoords) c.resize(n);
@@ -140,6 +164,11 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
         m_denseCells[std::size_t(((cc[2] - lo[2]) * m_denseSize[1] + (cc[1] - lo[1])) * m_denseSize[0] +
                                  (cc[0] - lo[0]))] = std::uint32_t(c + 1);
     }
+}
+
+void UniformGrid::releaseWorkingMemory() {
+    std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(m_keyed);
+    std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(m_keyedScratch);
 }
 
 std::int64_t UniformGrid::findCell(std::int64_t cx, std::int64_t cy, std::int64_t cz) const {
@@ -262,7 +291,7 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     out.offsets[0] = 0;
     for (std::size_t i = 0; i < n; ++i) out.offsets[i + 1] = out.offsets[i] + count[i];
     out.indices.resize(out.offsets[n]);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& range) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& range) {
         for (std::size_t i = range.begin(); i != range.end(); ++i) {
             const std::uint32_t* from = buffers[chunkOf[i]].data() + localStart[i];
             std::uint32_t* to = out.indices.data() + out.offsets[i];

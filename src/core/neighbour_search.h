@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 namespace ganache {
@@ -54,6 +55,10 @@ public:
     /// addressable range, naming its index.
     void build(const std::vector<Vec3>& x);
 
+    /// Frees build()'s working memory, which it keeps for the next build (a grid rebuilt every step would otherwise
+    /// allocate it anew each time, and fault it in again): for a grid built once, whose memory counts while it lives.
+    void releaseWorkingMemory();
+
     Real cellSize() const { return m_cellSize; }
     std::size_t pointCount() const { return m_sorted.size(); }
     std::size_t cellCount() const { return m_cellKeys.size(); }
@@ -78,6 +83,7 @@ private:
     Real m_cellSize;
     std::vector<std::uint32_t> m_sorted;
     std::vector<std::pair<std::uint64_t, std::uint32_t>> m_keyed;  // build()'s (cell key, point), kept between builds
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> m_keyedScratch;  // sortByKey's other buffer
     std::array<std::vector<Real>, 3> m_sortedCoords;  // the points' coordinates in sorted order
     std::vector<std::uint64_t> m_cellKeys;   // Morton keys of the occupied cells, ascending
     std::vector<std::uint32_t> m_cellBegin;  // cellCount() + 1 offsets into m_sorted
@@ -90,6 +96,11 @@ private:
     std::array<std::int64_t, 3> m_denseMin{};
     std::array<std::int64_t, 3> m_denseSize{};
 };
+
+/// Sorts (key, index) pairs by key, pairs of equal keys in the order they came in (a stable radix sort; `scratch` is
+/// its other buffer, kept by the caller between sorts): with indices ascending in `items`, the order of std::sort.
+void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
+               std::vector<std::pair<std::uint64_t, std::uint32_t>>& scratch);
 
 /// Finds, for every query point i, the target points j with |x_i - x_j| < radius. With sameSet the query
 /// and target are one set and i is not its own neighbour. Both grids must have cell size >= radius and be

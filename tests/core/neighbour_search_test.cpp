@@ -166,3 +166,19 @@ TEST(NeighbourSearch, RejectsNonFiniteAndFarPoints) {
     EXPECT_THROW(grid.build({Vec3(0, 0, 0), Vec3(NAN, 0, 0)}), std::runtime_error);
     EXPECT_THROW(grid.build({Vec3(1e6, 0, 0)}), std::runtime_error);
 }
+
+TEST(NeighbourSearch, SortByKeyGivesTheOrderOfStdSort) {
+    // Keys that differ in every byte, in a few bytes only (a small fluid's cells), and repeated keys (points sharing a
+    // cell), each with ascending indices as the grid makes them.
+    std::mt19937_64 rng(11);
+    for (const std::uint64_t mask : {~std::uint64_t(0), std::uint64_t(0x00ff00000000f0f0), std::uint64_t(0x7)}) {
+        for (const std::size_t n : {0, 1, 2, 300, 5000}) {
+            std::vector<std::pair<std::uint64_t, std::uint32_t>> items(n), scratch;
+            for (std::size_t i = 0; i < n; ++i) items[i] = {(rng() & mask) | 0x1234000000000000ULL, std::uint32_t(i)};
+            auto expected = items;
+            std::sort(expected.begin(), expected.end());
+            sortByKey(items, scratch);
+            EXPECT_EQ(items, expected) << "mask " << mask << ", " << n << " items";
+        }
+    }
+}
