@@ -24,6 +24,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 namespace ganache::surfacing {
 
@@ -320,16 +321,18 @@ class NearestSphere {
 public:
     static constexpr bool kNothingOutside = false;  // a distance beyond the support is no sphere's
     NearestSphere(float support, float radius, float far) : m_support(support), m_radius(radius), m_far(far) {}
-    void start(const Vec3&) { std::fill(m_distance, m_distance + 512, m_far); }
+    void start(const Vec3&) { std::fill(m_nearest2, m_nearest2 + 512, std::numeric_limits<float>::infinity()); }
+    // Only the nearest centre's squared distance (in supports): the distance grows with it, so its square root is
+    // taken once per point, in value(), instead of once per sphere.
     void add(const Ellipsoid&, int a, int b, const RowOfEight& px, const RowOfEight& py, const RowOfEight& pz) {
-        Eigen::Map<RowOfEight> row(m_distance + a * 64 + b * 8);
-        row = row.min((px * px + py * py + pz * pz).sqrt() * m_support - m_radius);
+        Eigen::Map<RowOfEight> row(m_nearest2 + a * 64 + b * 8);
+        row = row.min(px * px + py * py + pz * pz);
     }
-    float value(int n) const { return m_distance[n]; }
+    float value(int n) const { return std::min(m_far, std::sqrt(m_nearest2[n]) * m_support - m_radius); }
 
 private:
     float m_support, m_radius, m_far;
-    alignas(32) float m_distance[512];
+    alignas(32) float m_nearest2[512];
 };
 
 // Every leaf of the binned lattice that some kernel reaches (a cell of the bins is a leaf), all bricks chosen.

@@ -116,12 +116,16 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
 
     m_sorted.resize(n);
     for (auto& c : m_sortedCoords) c.resize(n);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& r) {
+        for (std::size_t s = r.begin(); s != r.end(); ++s) {
+            m_sorted[s] = keyed[s].second;
+            for (int a = 0; a < 3; ++a) m_sortedCoords[std::size_t(a)][s] = x[keyed[s].second][a];
+        }
+    });
     m_cellKeys.clear();
     m_cellBegin.clear();
     m_cellCoords.clear();
     for (std::size_t s = 0; s < n; ++s) {
-        m_sorted[s] = keyed[s].second;
-        for (int a = 0; a < 3; ++a) m_sortedCoords[std::size_t(a)][s] = x[keyed[s].second][a];
         if (s == 0 || keyed[s].first != keyed[s - 1].first) {
             m_cellKeys.push_back(keyed[s].first);
             m_cellBegin.push_back(std::uint32_t(s));
