@@ -439,10 +439,7 @@ std::vector<LatticeLeaf> fineLeaves(const openvdb::MaskGrid& bricks) {
 // the inactive ones read as inside or outside by flood fill.
 void keepBand(FloatGrid& grid, float band) {
     openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid.tree());
-    leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
-        for (auto it = leaf.beginValueOn(); it; ++it)
-            if (std::abs(*it) >= band) leaf.setValueOff(it.pos(), *it < 0 ? -band : band);
-    });
+    leaves.foreach([&](FloatLeaf& leaf, std::size_t) { trimLeaf(leaf, band); });
     grid.tree().root().setBackground(band, false);
     openvdb::tools::pruneInactive(grid.tree());
     openvdb::tools::signedFloodFill(grid.tree());

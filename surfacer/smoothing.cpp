@@ -60,6 +60,22 @@ void LeafNeighbourhood::gather(const FloatLeaf& leaf, bool inactiveAsNaN) {
         }
 }
 
+void trimLeaf(FloatLeaf& leaf, float band) {
+    // A word of the value mask at a time, visiting only its active voxels (an OpenVDB value iterator per voxel took
+    // a sixth of plain spheres' offset).
+    float* values = leaf.buffer().data();
+    for (openvdb::Index w = 0; w < 8; ++w) {
+        std::uint64_t& word = leaf.getValueMask().getWord<std::uint64_t>(w);
+        for (std::uint64_t bits = word; bits; bits &= bits - 1) {
+            const int k = __builtin_ctzll(bits);
+            float& value = values[64 * w + openvdb::Index(k)];
+            if (std::abs(value) < band) continue;
+            value = value < 0 ? -band : band;
+            word &= ~(std::uint64_t(1) << k);
+        }
+    }
+}
+
 namespace {
 
 // Eight voxels along z, one SIMD vector.
@@ -152,10 +168,7 @@ void renormalise(openvdb::FloatGrid& grid, int sweeps) {
     openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid.tree(), 1);
     for (int sweep = 0; sweep < sweeps; ++sweep)
         eachActiveRow(leaves, grid.tree(), [&](const Rows& p) { return renormaliseStep(p, voxel); });
-    leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
-        for (auto it = leaf.beginValueOn(); it; ++it)
-            if (std::abs(*it) >= band) leaf.setValueOff(it.pos(), *it < 0 ? -band : band);
-    });
+    leaves.foreach([&](FloatLeaf& leaf, std::size_t) { trimLeaf(leaf, band); });
 }
 
 }  // namespace
@@ -183,7 +196,10 @@ void offsetLevelSet(openvdb::FloatGrid& grid, float distance) {
     for (int move = 0; move < moves; ++move) {
         openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid.tree());
         leaves.foreach([&](FloatLeaf& leaf, std::size_t) {
-            for (auto it = leaf.beginValueOn(); it; ++it) it.setValue(*it + step);
+            float* values = leaf.buffer().data();
+            for (openvdb::Index w = 0; w < 8; ++w)
+                for (std::uint64_t bits = leaf.getValueMask().getWord<std::uint64_t>(w); bits; bits &= bits - 1)
+                    values[64 * w + openvdb::Index(__builtin_ctzll(bits))] += step;
         });
         renormalise(grid, 2);
     }
