@@ -43,11 +43,20 @@ constexpr std::size_t kMinNeighbours = 12;  // fewer: the spread says little, th
 // margin keeps thin sheets, whose sum peaks a little above one half between two coarse points.
 constexpr Real kSeedLow = 0.35, kSeedHigh = 0.65;
 
+// A kernel's shape in single precision (the sums evaluate in it anyway): 72 bytes instead of 120 a particle.
 struct Ellipsoid {
     Vec3 centre;
-    Mat3 shape;    // A: a point y from the centre counts at distance |A y| (det A = 1)
-    Vec3 extent;   // half size of its bounding box [m]
+    Eigen::Matrix3f shape;  // A: a point y from the centre counts at distance |A y| (det A = 1)
+    Eigen::Vector3f extent;  // half size of its bounding box [m], rounded up
 };
+
+// An ellipsoid's box half size in single precision, never smaller than in double.
+Eigen::Vector3f extentAbove(const Vec3& extent) {
+    Eigen::Vector3f out;
+    for (int axis = 0; axis < 3; ++axis)
+        out[axis] = std::nextafter(float(extent[axis]), std::numeric_limits<float>::infinity());
+    return out;
+}
 
 // Each particle's kernel from the spread of its neighbours within the support. The sums the spread needs are
 // taken in one pass over the 27 grid cells around the particle's own, without storing neighbour lists (which cost
@@ -94,7 +103,7 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                 const std::uint32_t i = grid.sortedIndices()[s];
                 Ellipsoid& e = out[i];
                 e.centre = x[i];
-                e.shape = Mat3::Identity();
+                Mat3 shape = Mat3::Identity();
                 if (count >= kMinNeighbours) {
                     const Vec3 mean = Vec3(m[0], m[1], m[2]) / total;
                     Mat3 covariance;
@@ -105,12 +114,15 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                     Vec3 scale = eigen.eigenvalues().cwiseMax(eigen.eigenvalues().maxCoeff() / kMaxStretch);
                     scale /= std::cbrt(scale.prod());  // keep the kernel's volume: the interior's sum does not change
                     const Mat3& axes = eigen.eigenvectors();
-                    e.shape = axes * scale.cwiseInverse().asDiagonal() * axes.transpose();
+                    shape = axes * scale.cwiseInverse().asDiagonal() * axes.transpose();
                 }
                 // The ellipsoid {y : |A y| < support} = A^-1 (ball); its box's half size along axis k is
                 // support |row_k A^-1|.
-                const Mat3 inverse = e.shape.inverse();
-                for (int axis = 0; axis < 3; ++axis) e.extent[axis] = support * inverse.row(axis).norm();
+                e.shape = shape.cast<float>();
+                const Mat3 inverse = e.shape.cast<Real>().inverse();
+                Vec3 extent;
+                for (int axis = 0; axis < 3; ++axis) extent[axis] = support * inverse.row(axis).norm();
+                e.extent = extentAbove(extent);
             }
         }
     }, 16);
@@ -159,7 +171,7 @@ struct KernelBins {
     KernelBins(const std::vector<Ellipsoid>& kernels, Real spacing) : h(spacing), grid(8 * spacing) {
         std::vector<Vec3> centres(kernels.size());
         for (std::size_t i = 0; i < kernels.size(); ++i)
-            reach = reach.cwiseMax(kernels[i].extent), centres[i] = kernels[i].centre;
+            reach = reach.cwiseMax(kernels[i].extent.cast<Real>()), centres[i] = kernels[i].centre;
         grid.build(centres);
         grid.releaseWorkingMemory();
     }
@@ -202,14 +214,16 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                         for (std::size_t k = bins.cellBegin(ci); k < bins.cellBegin(ci + 1); ++k) {
                             const Ellipsoid& e = kernels[bins.sortedIndices()[k]];
                             // The kernel's box in the leaf's point indices (0..7).
-                            const Vec3 boxLo = ((e.centre - e.extent - lo) / h).array().ceil();
-                            const Vec3 boxHi = ((e.centre + e.extent - lo) / h).array().floor();
+                            const Vec3 extent = e.extent.cast<Real>();
+                            const Vec3 boxLo = ((e.centre - extent - lo) / h).array().ceil();
+                            const Vec3 boxHi = ((e.centre + extent - lo) / h).array().floor();
                             if ((boxLo.array() > 7).any() || (boxHi.array() < 0).any()) continue;
                             const int aLo = std::max(0, int(boxLo.x())), aHi = std::min(7, int(boxHi.x()));
                             const int bLo = std::max(0, int(boxLo.y())), bHi = std::min(7, int(boxHi.y()));
                             // A y in supports at point (a, b, c) of the leaf: u0 + a dx + b dy + c dz.
-                            const Mat3 m = e.shape * (h / support);
-                            const Vec3 u0d = e.shape * (lo - e.centre) / support;
+                            const Mat3 shape = e.shape.cast<Real>();
+                            const Mat3 m = shape * (h / support);
+                            const Vec3 u0d = shape * (lo - e.centre) / support;
                             const float u0[3] = {float(u0d.x()), float(u0d.y()), float(u0d.z())};
                             const float dx[3] = {float(m(0, 0)), float(m(1, 0)), float(m(2, 0))};
                             const float dy[3] = {float(m(0, 1)), float(m(1, 1)), float(m(2, 1))};
@@ -522,7 +536,8 @@ namespace {
 template <class MakeField>
 FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real voxel, Real halfBand, MakeField&& field) {
     std::vector<Ellipsoid> kernels(x.size());
-    for (std::size_t i = 0; i < x.size(); ++i) kernels[i] = {x[i], Mat3::Identity(), Vec3::Constant(support)};
+    const Eigen::Vector3f extent = extentAbove(Vec3::Constant(support));
+    for (std::size_t i = 0; i < x.size(); ++i) kernels[i] = {x[i], Eigen::Matrix3f::Identity(), extent};
     const float band = float(halfBand * voxel), far = 2 * band;
     const KernelBins coarseBins(kernels, 2 * voxel);
     const FloatGrid::Ptr coarse =
