@@ -136,14 +136,15 @@ const RowOfEight kRowSteps = RowOfEight::LinSpaced(8, 0, 7);
 // The kernel's profile over s = q^2 (q = distance / support): (1 - s)^3 (1 + a s + b s^2), the cubic spline's
 // profile fitted by least squares weighted by q^2 (as volume is). It stays within 0.007 of the spline (peak 1) and
 // vanishes at the support with two derivatives, as the spline does, but a row's points need no square root: the two
-// kernel sums took about a seventh less of the default's 1M frame than with the spline itself (docs/benchmarks.md).
+// kernel sums cost about a fifth less at 1M particles than with the spline itself (docs/benchmarks.md, change 11).
 constexpr float kShapeA = -2.0484819f, kShapeB = 1.6913138f;
 inline RowOfEight kernelShape(const RowOfEight& s) {
     const RowOfEight t = (1.f - s).max(0.f);
     return t * t * t * (1.f + s * (kShapeA + s * kShapeB));
 }
 
-// The sum of kernelShape at a point of a lattice of spacing 2r, support 4r (the points within two spacings).
+// The sum of kernelShape (the same polynomial, in double) at a point of a lattice of spacing 2r, support 4r (the
+// points within two spacings).
 Real latticeShapeSum() {
     Real sum = 0;
     for (int i = -2; i <= 2; ++i)
