@@ -179,6 +179,8 @@ TEST(NeighbourSearch, SortByKeyGivesTheOrderOfStdSort) {
             std::sort(expected.begin(), expected.end());
             sortByKey(items, scratch);
             EXPECT_EQ(items, expected) << "mask " << mask << ", " << n << " items";
+            sortByKey(items, scratch);  // already in order: left as it is
+            EXPECT_EQ(items, expected) << "mask " << mask << ", " << n << " items, sorted again";
         }
     }
 }
