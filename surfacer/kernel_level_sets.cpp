@@ -193,7 +193,8 @@ inline unsigned rowBricks(std::uint64_t bricks, int a, int b) {
 // then gives each chosen point's value. Each leaf gathers the kernels whose boxes reach it from a grid of their
 // centres, in that grid's fixed order: deterministic for any thread count. A field whose kernels add nothing
 // outside (Field::kNothingOutside) also takes the rows of a kernel's box that miss the ellipsoid; for the others those
-// rows are skipped. Returns the grid of the leaves made (background `background`).
+// rows are skipped. A field whose values do not depend on the kernels' order (Field::kMaySettle) may stop a leaf
+// early (field.settled()). Returns the grid of the leaves made (background `background`).
 template <class Field>
 FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
                           const std::vector<LatticeLeaf>& targets, Real support, float background,
@@ -210,56 +211,73 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
             const Vec3 lo = Vec3(o.x(), o.y(), o.z()) * h, hi = lo + Vec3::Constant(7 * h);
             field.start(lo);
             const Vec3 cellLo = ((lo - reach) / cell).array().floor(), cellHi = ((hi + reach) / cell).array().floor();
-            for (std::int64_t ca = std::int64_t(cellLo.x()); ca <= std::int64_t(cellHi.x()); ++ca)
-                for (std::int64_t cb = std::int64_t(cellLo.y()); cb <= std::int64_t(cellHi.y()); ++cb)
-                    for (std::int64_t cc = std::int64_t(cellLo.z()); cc <= std::int64_t(cellHi.z()); ++cc) {
-                        const std::int64_t found = bins.findCell(ca, cb, cc);
-                        if (found < 0) continue;
-                        const std::size_t ci = std::size_t(found);
-                        for (std::size_t k = bins.cellBegin(ci); k < bins.cellBegin(ci + 1); ++k) {
-                            const Ellipsoid& e = kernels[bins.sortedIndices()[k]];
-                            // The kernel's box in the leaf's point indices (0..7).
-                            const Vec3 extent = e.extent.cast<Real>();
-                            const Vec3 boxLo = ((e.centre - extent - lo) / h).array().ceil();
-                            const Vec3 boxHi = ((e.centre + extent - lo) / h).array().floor();
-                            if ((boxLo.array() > 7).any() || (boxHi.array() < 0).any()) continue;
-                            const int aLo = std::max(0, int(boxLo.x())), aHi = std::min(7, int(boxHi.x()));
-                            const int bLo = std::max(0, int(boxLo.y())), bHi = std::min(7, int(boxHi.y()));
-                            // A y in supports at point (a, b, c) of the leaf: u0 + a dx + b dy + c dz.
-                            const Mat3 shape = e.shape.cast<Real>();
-                            const Mat3 m = shape * (h / support);
-                            const Vec3 u0d = shape * (lo - e.centre) / support;
-                            const float u0[3] = {float(u0d.x()), float(u0d.y()), float(u0d.z())};
-                            const float dx[3] = {float(m(0, 0)), float(m(1, 0)), float(m(2, 0))};
-                            const float dy[3] = {float(m(0, 1)), float(m(1, 1)), float(m(2, 1))};
-                            const float dz[3] = {float(m(0, 2)), float(m(1, 2)), float(m(2, 2))};
-                            const float inverseStep = 1.f / (dz[0] * dz[0] + dz[1] * dz[1] + dz[2] * dz[2]);
-                            for (int a = aLo; a <= aHi; ++a) {
-                                float ua[3];
-                                for (int d = 0; d < 3; ++d) ua[d] = u0[d] + float(a) * dx[d];
-                                // A row at once (one vector), at the row's points u + c dz, c = 0..7.
-                                const auto row = [&](int b) {
-                                    if (!rowBricks(target.bricks, a, b)) return;
-                                    float u[3];
-                                    for (int d = 0; d < 3; ++d) u[d] = ua[d] + float(b) * dy[d];
-                                    // Rows that miss the ellipsoid (|u + c dz| < 1 for no c, a quadratic's roots)
-                                    // are skipped where adding them would change the field. Where it would not,
-                                    // the test costs more than the rows it saves (a quarter more rows evaluated,
-                                    // but the branch is mispredicted, and without it two rows' work overlaps).
-                                    if constexpr (!Field::kNothingOutside) {
-                                        const float middle = (u[0] * dz[0] + u[1] * dz[1] + u[2] * dz[2]) * inverseStep;
-                                        const float discriminant = middle * middle - (u[0] * u[0] + u[1] * u[1] +
-                                                                                      u[2] * u[2] - 1) * inverseStep;
-                                        if (discriminant <= 0) return;
-                                    }
-                                    field.add(e, a, b, u[0] + kRowSteps * dz[0], u[1] + kRowSteps * dz[1],
-                                              u[2] + kRowSteps * dz[2]);
-                                };
-#pragma GCC unroll 2
-                                for (int b = bLo; b <= bHi; ++b) row(b);
+            // The kernels of one cell of the bins.
+            const auto visit = [&](std::int64_t ca, std::int64_t cb, std::int64_t cc) {
+                const std::int64_t found = bins.findCell(ca, cb, cc);
+                if (found < 0) return;
+                const std::size_t ci = std::size_t(found);
+                for (std::size_t k = bins.cellBegin(ci); k < bins.cellBegin(ci + 1); ++k) {
+                    const Ellipsoid& e = kernels[bins.sortedIndices()[k]];
+                    // The kernel's box in the leaf's point indices (0..7).
+                    const Vec3 extent = e.extent.cast<Real>();
+                    const Vec3 boxLo = ((e.centre - extent - lo) / h).array().ceil();
+                    const Vec3 boxHi = ((e.centre + extent - lo) / h).array().floor();
+                    if ((boxLo.array() > 7).any() || (boxHi.array() < 0).any()) continue;
+                    const int aLo = std::max(0, int(boxLo.x())), aHi = std::min(7, int(boxHi.x()));
+                    const int bLo = std::max(0, int(boxLo.y())), bHi = std::min(7, int(boxHi.y()));
+                    // A y in supports at point (a, b, c) of the leaf: u0 + a dx + b dy + c dz.
+                    const Mat3 shape = e.shape.cast<Real>();
+                    const Mat3 m = shape * (h / support);
+                    const Vec3 u0d = shape * (lo - e.centre) / support;
+                    const float u0[3] = {float(u0d.x()), float(u0d.y()), float(u0d.z())};
+                    const float dx[3] = {float(m(0, 0)), float(m(1, 0)), float(m(2, 0))};
+                    const float dy[3] = {float(m(0, 1)), float(m(1, 1)), float(m(2, 1))};
+                    const float dz[3] = {float(m(0, 2)), float(m(1, 2)), float(m(2, 2))};
+                    const float inverseStep = 1.f / (dz[0] * dz[0] + dz[1] * dz[1] + dz[2] * dz[2]);
+                    for (int a = aLo; a <= aHi; ++a) {
+                        float ua[3];
+                        for (int d = 0; d < 3; ++d) ua[d] = u0[d] + float(a) * dx[d];
+                        // A row at once (one vector), at the row's points u + c dz, c = 0..7.
+                        const auto row = [&](int b) {
+                            if (!rowBricks(target.bricks, a, b)) return;
+                            float u[3];
+                            for (int d = 0; d < 3; ++d) u[d] = ua[d] + float(b) * dy[d];
+                            // Rows that miss the ellipsoid (|u + c dz| < 1 for no c, a quadratic's roots)
+                            // are skipped where adding them would change the field. Where it would not,
+                            // the test costs more than the rows it saves (a quarter more rows evaluated,
+                            // but the branch is mispredicted, and without it two rows' work overlaps).
+                            if constexpr (!Field::kNothingOutside) {
+                                const float middle = (u[0] * dz[0] + u[1] * dz[1] + u[2] * dz[2]) * inverseStep;
+                                const float discriminant = middle * middle - (u[0] * u[0] + u[1] * u[1] +
+                                                                              u[2] * u[2] - 1) * inverseStep;
+                                if (discriminant <= 0) return;
                             }
-                        }
+                            field.add(e, a, b, u[0] + kRowSteps * dz[0], u[1] + kRowSteps * dz[1],
+                                      u[2] + kRowSteps * dz[2]);
+                        };
+#pragma GCC unroll 2
+                        for (int b = bLo; b <= bHi; ++b) row(b);
                     }
+                }
+            };
+            const auto visitAll = [&] {
+                // A field that may settle takes its kernels in any order: the leaf's own cell first, whose kernels
+                // cover most of the leaf, then the others until it has settled.
+                const std::int64_t own[3] = {std::int64_t(std::floor(lo.x() / cell)),
+                                             std::int64_t(std::floor(lo.y() / cell)),
+                                             std::int64_t(std::floor(lo.z() / cell))};
+                if constexpr (Field::kMaySettle) visit(own[0], own[1], own[2]);
+                for (std::int64_t ca = std::int64_t(cellLo.x()); ca <= std::int64_t(cellHi.x()); ++ca)
+                    for (std::int64_t cb = std::int64_t(cellLo.y()); cb <= std::int64_t(cellHi.y()); ++cb)
+                        for (std::int64_t cc = std::int64_t(cellLo.z()); cc <= std::int64_t(cellHi.z()); ++cc) {
+                            if constexpr (Field::kMaySettle) {
+                                if (field.settled()) return;
+                                if (ca == own[0] && cb == own[1] && cc == own[2]) continue;
+                            }
+                            visit(ca, cb, cc);
+                        }
+            };
+            visitAll();
             auto* leaf = new FloatLeaf(o, background, false);
             float* values = leaf->buffer().data();
             for (int n = 0; n < 512; ++n)
@@ -281,6 +299,7 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
 class ShapeSum {
 public:
     static constexpr bool kNothingOutside = true;  // the kernel is zero there
+    static constexpr bool kMaySettle = false;
     ShapeSum(float scale, float iso) : m_scale(scale), m_iso(iso) {}
     void start(const Vec3&) { std::fill(m_sum, m_sum + 512, 0.f); }
     void add(const Ellipsoid&, int a, int b, const RowOfEight& px, const RowOfEight& py, const RowOfEight& pz) {
@@ -307,6 +326,7 @@ FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const KernelBins
 class AveragedSpheres {
 public:
     static constexpr bool kNothingOutside = true;  // the weights are zero there
+    static constexpr bool kMaySettle = false;
     AveragedSpheres(float spacing, float radius, float far) : m_h(spacing), m_radius(radius), m_far(far) {}
     void start(const Vec3& lo) {
         m_lo = lo;
@@ -335,11 +355,14 @@ private:
 };
 
 // The union of spheres: the distance to the nearest sphere's surface (negative inside), `far` where no sphere's
-// support reaches.
+// support reaches. With signOnly, only the sign is asked for: a leaf whose points all lie inside some sphere has
+// settled, and its other kernels are left out (the fluid's inside, most of the coarse lattice's leaves).
 class NearestSphere {
 public:
     static constexpr bool kNothingOutside = false;  // a distance beyond the support is no sphere's
-    NearestSphere(float support, float radius, float far) : m_support(support), m_radius(radius), m_far(far) {}
+    static constexpr bool kMaySettle = true;        // a minimum: any order gives the same values
+    NearestSphere(float support, float radius, float far, bool signOnly)
+        : m_support(support), m_radius(radius), m_far(far), m_signOnly(signOnly) {}
     void start(const Vec3&) { std::fill(m_nearest2, m_nearest2 + 512, std::numeric_limits<float>::infinity()); }
     // Only the nearest centre's squared distance (in supports): the distance grows with it, so its square root is
     // taken once per point, in value(), instead of once per sphere.
@@ -347,10 +370,17 @@ public:
         Eigen::Map<RowOfEight> row(m_nearest2 + a * 64 + b * 8);
         row = row.min(px * px + py * py + pz * pz);
     }
-    float value(int n) const { return std::min(m_far, std::sqrt(m_nearest2[n]) * m_support - m_radius); }
+    float value(int n) const { return distance(m_nearest2[n]); }
+    // Every point inside: more spheres can only lower the values (the distance never falls as its square grows).
+    bool settled() const {
+        return m_signOnly && distance(Eigen::Map<const Eigen::Array<float, 512, 1>>(m_nearest2).maxCoeff()) < 0;
+    }
 
 private:
+    float distance(float nearest2) const { return std::min(m_far, std::sqrt(nearest2) * m_support - m_radius); }
+
     float m_support, m_radius, m_far;
+    bool m_signOnly;
     alignas(32) float m_nearest2[512];
 };
 
@@ -534,8 +564,9 @@ FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxe
 namespace {
 
 // The narrow band of a field that is a distance near the surface, from round kernels of radius `support` around
-// the particles: the field (field(spacing, far) for a lattice's spacing and the value where no kernel reaches) on
-// the coarse lattice, then on the fine one near the bricks whose corners lie on both sides of the surface. (Inside,
+// the particles: the field (field(spacing, far, signOnly) for a lattice's spacing, the value where no kernel reaches,
+// and whether only its sign is asked for) on the coarse lattice, where only the sign is, then on the fine one near the
+// bricks whose corners lie on both sides of the surface. (Inside,
 // these fields stay near minus a particle's size instead of growing like a distance, so the band cannot be chosen
 // by their values.)
 template <class MakeField>
@@ -546,10 +577,10 @@ FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real vo
     const float band = float(halfBand * voxel), far = 2 * band;
     const KernelBins coarseBins(kernels, 2 * voxel);
     const FloatGrid::Ptr coarse =
-        gatherRows(kernels, coarseBins, leavesReached(coarseBins), support, far, field(2 * voxel, far));
-    const std::vector<LatticeLeaf> targets = bricksNearSurface(*coarse, 0.f, 0.f, halfBand);
+        gatherRows(kernels, coarseBins, leavesReached(coarseBins), support, far, field(2 * voxel, far, true));
+    const std::vector<LatticeLeaf> targets = bricksNearSurface(*coarse, 0.f, 0.f, halfBand);  // on the sign alone
     const FloatGrid::Ptr fine =
-        gatherRows(kernels, KernelBins(kernels, voxel), targets, support, far, field(voxel, far));
+        gatherRows(kernels, KernelBins(kernels, voxel), targets, support, far, field(voxel, far, false));
     keepBand(*fine, band);
     fine->setGridClass(openvdb::GRID_LEVEL_SET);
     return fine;
@@ -558,15 +589,15 @@ FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real vo
 }  // namespace
 
 FloatGrid::Ptr smoothSpheresLevelSet(const std::vector<Vec3>& x, Real radius, Real search, Real voxel, Real halfBand) {
-    return bandNearSurface(x, search, voxel, halfBand, [&](Real spacing, float far) {
+    return bandNearSurface(x, search, voxel, halfBand, [&](Real spacing, float far, bool) {
         return AveragedSpheres(float(spacing), float(radius), far);
     });
 }
 
 FloatGrid::Ptr sphereUnionLevelSet(const std::vector<Vec3>& x, Real radius, Real voxel, Real halfBand) {
     const Real support = radius + halfBand * voxel;  // where a sphere's own distance leaves the band
-    return bandNearSurface(x, support, voxel, halfBand, [&](Real, float far) {
-        return NearestSphere(float(support), float(radius), far);
+    return bandNearSurface(x, support, voxel, halfBand, [&](Real, float far, bool signOnly) {
+        return NearestSphere(float(support), float(radius), far, signOnly);
     });
 }
 

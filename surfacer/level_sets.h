@@ -20,6 +20,11 @@ public:
     explicit LeafNeighbourhood(const openvdb::FloatTree& tree) : m_tree(tree) {}
     /// Points outside the tree's leaves take its tiles' values; with inactiveAsNaN, every inactive point reads NaN.
     void gather(const FloatLeaf& leaf, bool inactiveAsNaN = false);
+    /// The same from values already found: data[a][b][c] the 512 values of the leaf at offset 8 (a - 1, b - 1, c - 1)
+    /// from this one (index 1 along each axis this leaf), or null where there is none and tile[a][b][c] its value.
+    void gather(const float* const (&data)[3][3][3], const float (&tile)[3][3][3]);
+    /// Adds `move` to every value gathered whose magnitude is below `band`.
+    void moveInside(float band, float move);
     /// The value at (i, j, k) of the leaf, each in -1..8.
     float operator()(int i, int j, int k) const { return m_values[i + 1][j + 1][k + 1]; }
     /// The row along z at (i, j), each in -1..8: its ten values from k = -1 to 8.
