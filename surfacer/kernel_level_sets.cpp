@@ -193,8 +193,9 @@ inline unsigned rowBricks(std::uint64_t bricks, int a, int b) {
 // then gives each chosen point's value. Each leaf gathers the kernels whose boxes reach it from a grid of their
 // centres, in that grid's fixed order: deterministic for any thread count. A field whose kernels add nothing
 // outside (Field::kNothingOutside) also takes the rows of a kernel's box that miss the ellipsoid; for the others those
-// rows are skipped. A field whose values do not depend on the kernels' order (Field::kMaySettle) may stop a leaf
-// early (field.settled()). Returns the grid of the leaves made (background `background`).
+// rows are skipped. A leaf stops taking kernels once field.settled(): its values are decided as far as they are asked
+// for. A field that may take its kernels in any order (field.orderFree()) takes the leaf's own cell first.
+// Returns the grid of the leaves made (background `background`).
 template <class Field>
 FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
                           const std::vector<LatticeLeaf>& targets, Real support, float background,
@@ -261,19 +262,17 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                 }
             };
             const auto visitAll = [&] {
-                // A field that may settle takes its kernels in any order: the leaf's own cell first, whose kernels
-                // cover most of the leaf, then the others until it has settled.
+                // The leaf's own cell first where the order is free: its kernels cover most of the leaf.
                 const std::int64_t own[3] = {std::int64_t(std::floor(lo.x() / cell)),
                                              std::int64_t(std::floor(lo.y() / cell)),
                                              std::int64_t(std::floor(lo.z() / cell))};
-                if constexpr (Field::kMaySettle) visit(own[0], own[1], own[2]);
+                const bool ownFirst = field.orderFree();
+                if (ownFirst) visit(own[0], own[1], own[2]);
                 for (std::int64_t ca = std::int64_t(cellLo.x()); ca <= std::int64_t(cellHi.x()); ++ca)
                     for (std::int64_t cb = std::int64_t(cellLo.y()); cb <= std::int64_t(cellHi.y()); ++cb)
                         for (std::int64_t cc = std::int64_t(cellLo.z()); cc <= std::int64_t(cellHi.z()); ++cc) {
-                            if constexpr (Field::kMaySettle) {
-                                if (field.settled()) return;
-                                if (ca == own[0] && cb == own[1] && cc == own[2]) continue;
-                            }
+                            if (field.settled()) return;
+                            if (ownFirst && ca == own[0] && cb == own[1] && cc == own[2]) continue;
                             visit(ca, cb, cc);
                         }
             };
@@ -296,29 +295,39 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
 
 // Yu & Turk's field: iso minus the kernels' sum (kernelShape, scaled to the cubic spline's peak), each particle
 // weighing one lattice cell (2r)^3.
+// The kernel sum as iso minus the sum. With settleBelow, only how the values lie against it and other such
+// thresholds is asked for: the order of the kernels, which moves a sum's last bits, is free, and since the sums only
+// grow (the shape is never negative), a leaf whose values all lie at or below settleBelow has settled.
 class ShapeSum {
 public:
     static constexpr bool kNothingOutside = true;  // the kernel is zero there
-    static constexpr bool kMaySettle = false;
-    ShapeSum(float scale, float iso) : m_scale(scale), m_iso(iso) {}
+    ShapeSum(float scale, float iso, float settleBelow = -std::numeric_limits<float>::infinity())
+        : m_scale(scale), m_iso(iso), m_settleBelow(settleBelow) {}
     void start(const Vec3&) { std::fill(m_sum, m_sum + 512, 0.f); }
     void add(const Ellipsoid&, int a, int b, const RowOfEight& px, const RowOfEight& py, const RowOfEight& pz) {
         Eigen::Map<RowOfEight>(m_sum + a * 64 + b * 8) += kernelShape(px * px + py * py + pz * pz);
     }
-    float value(int n) const { return m_iso - m_scale * m_sum[n]; }
+    float value(int n) const { return valueOf(m_sum[n]); }
+    bool orderFree() const { return m_settleBelow > -std::numeric_limits<float>::infinity(); }
+    bool settled() const {
+        return orderFree() && valueOf(Eigen::Map<const Eigen::Array<float, 512, 1>>(m_sum).minCoeff()) <= m_settleBelow;
+    }
 
 private:
-    float m_scale, m_iso;
+    float valueOf(float sum) const { return m_iso - m_scale * sum; }
+
+    float m_scale, m_iso, m_settleBelow;
     alignas(32) float m_sum[512];
 };
 
 // The kernel sum on the chosen bricks of the target leaves, as iso minus the sum (negative inside) on active
-// voxels; background iso.
+// voxels; background iso. Where only whether a value lies at or below settleBelow is asked for, it may stop there.
 FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
-                         const std::vector<LatticeLeaf>& targets, Real r, Real iso) {
+                         const std::vector<LatticeLeaf>& targets, Real r, Real iso,
+                         float settleBelow = -std::numeric_limits<float>::infinity()) {
     const CubicSpline w(kKernelSupport * r);
     const float scale = float(8 * r * r * r * w.W0());
-    return gatherRows(kernels, binned, targets, w.supportRadius(), float(iso), ShapeSum(scale, float(iso)));
+    return gatherRows(kernels, binned, targets, w.supportRadius(), float(iso), ShapeSum(scale, float(iso), settleBelow));
 }
 
 // Zhu & Bridson's field: the distance to the weighted mean of the particles within the search radius, less the
@@ -326,7 +335,6 @@ FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const KernelBins
 class AveragedSpheres {
 public:
     static constexpr bool kNothingOutside = true;  // the weights are zero there
-    static constexpr bool kMaySettle = false;
     AveragedSpheres(float spacing, float radius, float far) : m_h(spacing), m_radius(radius), m_far(far) {}
     void start(const Vec3& lo) {
         m_lo = lo;
@@ -347,6 +355,8 @@ public:
                     z = m_z[n] / m_w[n] - m_h * float(n & 7);
         return std::sqrt(x * x + y * y + z * z) - m_radius;
     }
+    bool orderFree() const { return false; }  // a sum: its last bits depend on the order
+    bool settled() const { return false; }    // a weighted mean may move either way
 
 private:
     float m_h, m_radius, m_far;
@@ -360,7 +370,6 @@ private:
 class NearestSphere {
 public:
     static constexpr bool kNothingOutside = false;  // a distance beyond the support is no sphere's
-    static constexpr bool kMaySettle = true;        // a minimum: any order gives the same values
     NearestSphere(float support, float radius, float far, bool signOnly)
         : m_support(support), m_radius(radius), m_far(far), m_signOnly(signOnly) {}
     void start(const Vec3&) { std::fill(m_nearest2, m_nearest2 + 512, std::numeric_limits<float>::infinity()); }
@@ -371,6 +380,7 @@ public:
         row = row.min(px * px + py * py + pz * pz);
     }
     float value(int n) const { return distance(m_nearest2[n]); }
+    bool orderFree() const { return true; }  // a minimum: any order gives the same values
     // Every point inside: more spheres can only lower the values (the distance never falls as its square grows).
     bool settled() const {
         return m_signOnly && distance(Eigen::Map<const Eigen::Array<float, 512, 1>>(m_nearest2).maxCoeff()) < 0;
@@ -552,9 +562,11 @@ FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxe
     const Real interior = latticeShapeSum() * w.W0() * 8 * r * r * r;
     const std::vector<Ellipsoid> kernels = anisotropicKernels(x, r);
     const KernelBins coarseBins(kernels, 2 * voxel);
-    const FloatGrid::Ptr coarse = kernelSum(kernels, coarseBins, leavesReached(coarseBins), r, 0.5 * interior);
-    const std::vector<LatticeLeaf> fine =
-        bricksNearSurface(*coarse, float((0.5 - kSeedHigh) * interior), float((0.5 - kSeedLow) * interior), halfBand);
+    // The coarse lattice only tells inside, outside and between apart: a leaf all inside is decided.
+    const float insideBelow = float((0.5 - kSeedHigh) * interior), outsideAbove = float((0.5 - kSeedLow) * interior);
+    const FloatGrid::Ptr coarse =
+        kernelSum(kernels, coarseBins, leavesReached(coarseBins), r, 0.5 * interior, insideBelow);
+    const std::vector<LatticeLeaf> fine = bricksNearSurface(*coarse, insideBelow, outsideAbove, halfBand);
     const FloatGrid::Ptr field = kernelSum(kernels, KernelBins(kernels, voxel), fine, r, 0.5 * interior);
     fieldToDistance(*field, voxel, halfBand);
     field->setGridClass(openvdb::GRID_LEVEL_SET);
