@@ -365,13 +365,14 @@ private:
 };
 
 // The union of spheres: the distance to the nearest sphere's surface (negative inside), `far` where no sphere's
-// support reaches. With signOnly, only the sign is asked for: a leaf whose points all lie inside some sphere has
-// settled, and its other kernels are left out (the fluid's inside, most of the coarse lattice's leaves).
+// support reaches. Values below settleBelow are asked for only as such (on the coarse lattice only the sign is, and
+// past the band's inner edge every value ends as its half width): a leaf whose values all lie below it has settled,
+// and its other kernels are left out (the fluid's inside, most of the coarse lattice's leaves).
 class NearestSphere {
 public:
     static constexpr bool kNothingOutside = false;  // a distance beyond the support is no sphere's
-    NearestSphere(float support, float radius, float far, bool signOnly)
-        : m_support(support), m_radius(radius), m_far(far), m_signOnly(signOnly) {}
+    NearestSphere(float support, float radius, float far, float settleBelow)
+        : m_support(support), m_radius(radius), m_far(far), m_settleBelow(settleBelow) {}
     void start(const Vec3&) { std::fill(m_nearest2, m_nearest2 + 512, std::numeric_limits<float>::infinity()); }
     // Only the nearest centre's squared distance (in supports): the distance grows with it, so its square root is
     // taken once per point, in value(), instead of once per sphere.
@@ -381,16 +382,15 @@ public:
     }
     float value(int n) const { return distance(m_nearest2[n]); }
     bool orderFree() const { return true; }  // a minimum: any order gives the same values
-    // Every point inside: more spheres can only lower the values (the distance never falls as its square grows).
+    // More spheres can only lower the values (the distance never falls as its square grows).
     bool settled() const {
-        return m_signOnly && distance(Eigen::Map<const Eigen::Array<float, 512, 1>>(m_nearest2).maxCoeff()) < 0;
+        return distance(Eigen::Map<const Eigen::Array<float, 512, 1>>(m_nearest2).maxCoeff()) < m_settleBelow;
     }
 
 private:
     float distance(float nearest2) const { return std::min(m_far, std::sqrt(nearest2) * m_support - m_radius); }
 
-    float m_support, m_radius, m_far;
-    bool m_signOnly;
+    float m_support, m_radius, m_far, m_settleBelow;
     alignas(32) float m_nearest2[512];
 };
 
@@ -576,11 +576,11 @@ FloatGrid::Ptr anisotropicLevelSet(const std::vector<Vec3>& x, Real r, Real voxe
 namespace {
 
 // The narrow band of a field that is a distance near the surface, from round kernels of radius `support` around
-// the particles: the field (field(spacing, far, signOnly) for a lattice's spacing, the value where no kernel reaches,
-// and whether only its sign is asked for) on the coarse lattice, where only the sign is, then on the fine one near the
-// bricks whose corners lie on both sides of the surface. (Inside,
-// these fields stay near minus a particle's size instead of growing like a distance, so the band cannot be chosen
-// by their values.)
+// the particles: the field (field(spacing, far, settleBelow) for a lattice's spacing, the value where no kernel
+// reaches, and the value below which no value is asked for but as such) on the coarse lattice, where only the sign
+// is, then on the fine one near the bricks whose corners lie on both sides of the surface, which ends the band at its
+// half width. (Inside, these fields stay near minus a particle's size instead of growing like a distance, so the band
+// cannot be chosen by their values.)
 template <class MakeField>
 FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real voxel, Real halfBand, MakeField&& field) {
     std::vector<Ellipsoid> kernels(x.size());
@@ -589,10 +589,10 @@ FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real vo
     const float band = float(halfBand * voxel), far = 2 * band;
     const KernelBins coarseBins(kernels, 2 * voxel);
     const FloatGrid::Ptr coarse =
-        gatherRows(kernels, coarseBins, leavesReached(coarseBins), support, far, field(2 * voxel, far, true));
+        gatherRows(kernels, coarseBins, leavesReached(coarseBins), support, far, field(2 * voxel, far, 0.f));
     const std::vector<LatticeLeaf> targets = bricksNearSurface(*coarse, 0.f, 0.f, halfBand);  // on the sign alone
     const FloatGrid::Ptr fine =
-        gatherRows(kernels, KernelBins(kernels, voxel), targets, support, far, field(voxel, far, false));
+        gatherRows(kernels, KernelBins(kernels, voxel), targets, support, far, field(voxel, far, -band));
     keepBand(*fine, band);
     fine->setGridClass(openvdb::GRID_LEVEL_SET);
     return fine;
@@ -601,15 +601,15 @@ FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real vo
 }  // namespace
 
 FloatGrid::Ptr smoothSpheresLevelSet(const std::vector<Vec3>& x, Real radius, Real search, Real voxel, Real halfBand) {
-    return bandNearSurface(x, search, voxel, halfBand, [&](Real spacing, float far, bool) {
+    return bandNearSurface(x, search, voxel, halfBand, [&](Real spacing, float far, float) {
         return AveragedSpheres(float(spacing), float(radius), far);
     });
 }
 
 FloatGrid::Ptr sphereUnionLevelSet(const std::vector<Vec3>& x, Real radius, Real voxel, Real halfBand) {
     const Real support = radius + halfBand * voxel;  // where a sphere's own distance leaves the band
-    return bandNearSurface(x, support, voxel, halfBand, [&](Real, float far, bool signOnly) {
-        return NearestSphere(float(support), float(radius), far, signOnly);
+    return bandNearSurface(x, support, voxel, halfBand, [&](Real, float far, float settleBelow) {
+        return NearestSphere(float(support), float(radius), far, settleBelow);
     });
 }
 
