@@ -128,14 +128,13 @@ public:
         m_tree = &tree;
         openvdb::tree::LeafManager<openvdb::FloatTree> leaves(tree);  // finds the leaves in parallel
         const std::size_t n = leaves.leafCount();
-        // Kept from one survey to the next, and the array's memory left as it comes (the passes write it all first).
+        // Kept from one survey to the next. The second values come in blocks of a few leaves, small enough to come
+        // from the heap's free memory (the level set builders' leaves and kernels, just freed) instead of fresh pages,
+        // which would add to the frame's peak; left as they come, since the passes write them first.
         m_leaves.resize(n);
         m_own.resize(n);
         m_around.resize(n);
-        if (m_scratchLeaves < n) {
-            m_scratch.reset(new float[512 * n]);
-            m_scratchLeaves = n;
-        }
+        while (m_scratch.size() * kLeavesPerBlock < n) m_scratch.emplace_back(new float[512 * kLeavesPerBlock]);
         forEachBlock(n, [&](std::size_t begin, std::size_t end) {
             for (std::size_t l = begin; l != end; ++l) {
                 m_leaves[l] = &leaves.leaf(l);
@@ -226,14 +225,16 @@ private:
         openvdb::Index32 leaf;  // index in m_leaves, or kNoLeaf
         float tile;             // the tile's value where there is no leaf
     };
-    float* values(std::size_t l, bool inScratch) const { return inScratch ? m_scratch.get() + 512 * l : m_own[l]; }
+    float* values(std::size_t l, bool inScratch) const {
+        return inScratch ? m_scratch[l / kLeavesPerBlock].get() + 512 * (l % kLeavesPerBlock) : m_own[l];
+    }
 
     const openvdb::FloatTree* m_tree = nullptr;
     std::vector<FloatLeaf*> m_leaves;
     std::vector<float*> m_own;  // the leaves' buffers
     std::vector<std::array<Neighbour, 27>> m_around;  // per leaf, its neighbours at 8 (s / 9, s / 3 % 3, s % 3) - 8
-    std::unique_ptr<float[]> m_scratch;  // 512 values per leaf
-    std::size_t m_scratchLeaves = 0;
+    static constexpr std::size_t kLeavesPerBlock = 16;  // 32 KB, under glibc's threshold for a mapping of its own
+    std::vector<std::unique_ptr<float[]>> m_scratch;    // 512 values per leaf
     bool m_inScratch = false;
 };
 
