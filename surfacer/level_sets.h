@@ -22,7 +22,8 @@ public:
     void gather(const FloatLeaf& leaf, bool inactiveAsNaN = false);
     /// The same from values already found: data[a][b][c] the 512 values of the leaf at offset 8 (a - 1, b - 1, c - 1)
     /// from this one (index 1 along each axis this leaf), or null where there is none and tile[a][b][c] its value.
-    void gather(const float* const (&data)[3][3][3], const float (&tile)[3][3][3]);
+    /// With facesOnly, the points outside the leaf that are no voxel's face neighbour read NaN.
+    void gather(const float* const (&data)[3][3][3], const float (&tile)[3][3][3], bool facesOnly = false);
     /// Adds `move` to every value gathered whose magnitude is below `band`.
     void moveInside(float band, float move);
     /// The value at (i, j, k) of the leaf, each in -1..8.

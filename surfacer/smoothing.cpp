@@ -54,16 +54,28 @@ void LeafNeighbourhood::gather(const FloatLeaf& leaf, bool inactiveAsNaN) {
         }
 }
 
-void LeafNeighbourhood::gather(const float* const (&data)[3][3][3], const float (&tile)[3][3][3]) {
+void LeafNeighbourhood::gather(const float* const (&data)[3][3][3], const float (&tile)[3][3][3], bool facesOnly) {
     // Row by row along z: the row's eight inner points come from one leaf (or tile), its two ends from the leaves
     // below and above along z.
     for (int i = -1; i <= 8; ++i)
         for (int j = -1; j <= 8; ++j) {
             const int a = (i + 8) / 8, b = (j + 8) / 8;
             float* row = m_values[i + 1][j + 1];
+            const bool face = a != 1 || b != 1;  // a row of the layer around the leaf
+            if (facesOnly && face) {
+                // The edges' points (the ends of these rows, and the rows at the layer's corners) are left out: the
+                // leaves they lie in are read for a few points each, most of a gather's cache misses.
+                row[0] = row[9] = NAN;
+                if (a != 1 && b != 1) {
+                    std::fill_n(row + 1, 8, NAN);
+                    continue;
+                }
+            }
             const openvdb::Index start = openvdb::Index((i & 7) * 64 + (j & 7) * 8);
-            row[0] = data[a][b][0] ? data[a][b][0][start + 7] : tile[a][b][0];
-            row[9] = data[a][b][2] ? data[a][b][2][start] : tile[a][b][2];
+            if (!facesOnly || !face) {
+                row[0] = data[a][b][0] ? data[a][b][0][start + 7] : tile[a][b][0];
+                row[9] = data[a][b][2] ? data[a][b][2][start] : tile[a][b][2];
+            }
             if (const float* inner = data[a][b][1])
                 for (int k = 0; k < 8; ++k) row[k + 1] = inner[start + openvdb::Index(k)];  // one vector copy
             else
@@ -163,6 +175,7 @@ public:
         float move = 0;        // first added to every value inside the band (|value| < band)
         bool inner = false;    // only voxels inside the band take the step (not a layer just added at its edge)
         bool trim = false;     // then the active voxels now at or past the band leave it (trimLeaf)
+        bool facesOnly = false;  // the step reads only a voxel's six face neighbours (LeafNeighbourhood::gather)
     };
 
     // One pass: each active voxel's new value is step(rows) at its row of eight along z, the other voxels keep
@@ -180,7 +193,7 @@ public:
                     data[s / 9][s / 3 % 3][s % 3] = nb.leaf == kNoLeaf ? nullptr : values(nb.leaf, m_inScratch);
                     tile[s / 9][s / 3 % 3][s % 3] = nb.tile;
                 }
-                at.gather(data, tile);
+                at.gather(data, tile, options.facesOnly);
                 if (options.move != 0) at.moveInside(options.band, options.move);
                 float* out = values(l, !m_inScratch);
                 auto& mask = m_leaves[l]->getValueMask();  // only this leaf's: the passes read no neighbour's
@@ -300,7 +313,7 @@ void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes) {
         widenBand(grid);
         sweeps.survey(grid.tree());
         sweeps.pass(curvatureStep, {band, /*move*/ 0, /*inner*/ true, /*trim*/ false});
-        sweeps.pass(renormalising(grid), {band, /*move*/ 0, /*inner*/ false, /*trim*/ true});
+        sweeps.pass(renormalising(grid), {band, /*move*/ 0, /*inner*/ false, /*trim*/ true, /*facesOnly*/ true});
         sweeps.finish();
     }
     openvdb::tools::pruneLevelSet(grid.tree());
@@ -319,8 +332,8 @@ void offsetLevelSet(openvdb::FloatGrid& grid, float distance) {
     for (int move = 0; move < moves; ++move) {
         widenBand(grid);
         sweeps.survey(grid.tree());
-        sweeps.pass(renormalising(grid), {band, step, /*inner*/ false, /*trim*/ false});
-        sweeps.pass(renormalising(grid), {band, /*move*/ 0, /*inner*/ false, /*trim*/ true});
+        sweeps.pass(renormalising(grid), {band, step, /*inner*/ false, /*trim*/ false, /*facesOnly*/ true});
+        sweeps.pass(renormalising(grid), {band, /*move*/ 0, /*inner*/ false, /*trim*/ true, /*facesOnly*/ true});
         sweeps.finish();
     }
     openvdb::tools::pruneLevelSet(grid.tree());
