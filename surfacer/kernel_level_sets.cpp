@@ -294,10 +294,9 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
 }
 
 // Yu & Turk's field: iso minus the kernels' sum (kernelShape, scaled to the cubic spline's peak), each particle
-// weighing one lattice cell (2r)^3.
-// The kernel sum as iso minus the sum. With settleBelow, only how the values lie against it and other such
-// thresholds is asked for: the order of the kernels, which moves a sum's last bits, is free, and since the sums only
-// grow (the shape is never negative), a leaf whose values all lie at or below settleBelow has settled.
+// weighing one lattice cell (2r)^3. With settleBelow, only how the values lie against it and other such thresholds is
+// asked for: the order of the kernels, which moves a sum's last bits, is free, and since the sums only grow (the shape
+// is never negative), a leaf whose values all lie at or below settleBelow has settled.
 class ShapeSum {
 public:
     static constexpr bool kNothingOutside = true;  // the kernel is zero there
@@ -365,9 +364,9 @@ private:
 };
 
 // The union of spheres: the distance to the nearest sphere's surface (negative inside), `far` where no sphere's
-// support reaches. Values below settleBelow are asked for only as such (on the coarse lattice only the sign is, and
-// past the band's inner edge every value ends as its half width): a leaf whose values all lie below it has settled,
-// and its other kernels are left out (the fluid's inside, most of the coarse lattice's leaves).
+// support reaches. Below settleBelow it only matters that a value lies below it (on the coarse lattice only the sign
+// matters, and past the band's inner edge every value ends as its half width): a leaf whose values all lie below it
+// has settled, and its other kernels are left out (the fluid's inside, most of the coarse lattice's leaves).
 class NearestSphere {
 public:
     static constexpr bool kNothingOutside = false;  // a distance beyond the support is no sphere's
@@ -577,9 +576,9 @@ namespace {
 
 // The narrow band of a field that is a distance near the surface, from round kernels of radius `support` around
 // the particles: the field (field(spacing, far, settleBelow) for a lattice's spacing, the value where no kernel
-// reaches, and the value below which no value is asked for but as such) on the coarse lattice, where only the sign
-// is, then on the fine one near the bricks whose corners lie on both sides of the surface, which ends the band at its
-// half width. (Inside, these fields stay near minus a particle's size instead of growing like a distance, so the band
+// reaches, and the value below which it only matters that a value lies below it) on the coarse lattice, where only
+// the sign matters, then on the fine one near the bricks whose corners lie on both sides of the surface, where every
+// value past the band's inner edge ends as its half width. (Inside, these fields stay near minus a particle's size instead of growing like a distance, so the band
 // cannot be chosen by their values.)
 template <class MakeField>
 FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real voxel, Real halfBand, MakeField&& field) {

@@ -63,8 +63,8 @@ void LeafNeighbourhood::gather(const float* const (&data)[3][3][3], const float 
             float* row = m_values[i + 1][j + 1];
             const bool face = a != 1 || b != 1;  // a row of the layer around the leaf
             if (facesOnly && face) {
-                // The edges' points (the ends of these rows, and the rows at the layer's corners) are left out: the
-                // leaves they lie in are read for a few points each, most of a gather's cache misses.
+                // The edges' points (the ends of these rows, and the rows at the layer's corners) are left out: a
+                // step on face neighbours never reads them, and each lies in its own cache line of another leaf.
                 row[0] = row[9] = NAN;
                 if (a != 1 && b != 1) {
                     std::fill_n(row + 1, 8, NAN);
