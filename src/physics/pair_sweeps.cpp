@@ -172,7 +172,7 @@ void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* bo
 }
 
 void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Row* x,
-                    const Real* s, Real dt, Vec3* dv) {
+                    const Real* s, Real dt, Vec3* dv, Row* dvRows) {
     const std::uint64_t* off = fluid.list->offsets.data();
     const std::uint32_t* idx = fluid.list->indices.data();
     for (std::size_t i = begin; i < end; ++i) {
@@ -186,6 +186,7 @@ void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3*
         Vec3 total(l[0], l[1], l[2]);
         if (boundarySum) total += s[i] * boundarySum[i];
         dv[i] = -dt * total;
+        if (dvRows) dvRows[i] = Row(dv[i].x(), dv[i].y(), dv[i].z(), 0);
     }
 }
 

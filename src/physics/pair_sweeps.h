@@ -49,8 +49,8 @@ void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* bo
                  const Row* x, const Row* u, Real* rate);
 
 /// For i in [begin, end): dv_i = -dt (sum_p w_p (s_i + s_j) x_ij + s_i S_i), the velocity change of the pressures s
-/// [BK17], S_i as for densityRate.
+/// [BK17], S_i as for densityRate; also as rows where dvRows is not null (what densityRate reads).
 void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Row* x,
-                    const Real* s, Real dt, Vec3* dv);
+                    const Real* s, Real dt, Vec3* dv, Row* dvRows = nullptr);
 
 }  // namespace ganache::sweeps

@@ -43,11 +43,15 @@ PressureDFSPH::PressureDFSPH(const PressureSettings& settings, ParticleSet& part
 void PressureDFSPH::rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u,
                           bool withBodies, std::vector<Real>& out) {
     const std::size_t n = particles.size();
-    out.resize(n);
     m_velocityRows.resize(n);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         sweeps::toRows(begin, end, u.data(), m_velocityRows.data());
     });
+    ratesOfRows(ctx, n, withBodies, out);
+}
+
+void PressureDFSPH::ratesOfRows(const StepContext& ctx, std::size_t n, bool withBodies, std::vector<Real>& out) const {
+    out.resize(n);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         sweeps::densityRate(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
                             withBodies ? m_bodyRate.data() : nullptr, m_positionRows.data(), m_velocityRows.data(),
@@ -56,11 +60,13 @@ void PressureDFSPH::rates(const StepContext& ctx, const ParticleSet& particles, 
 }
 
 void PressureDFSPH::velocityChanges(const StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s,
-                                    std::vector<Vec3>& out) const {
+                                    std::vector<Vec3>& out, bool rows) {
     out.resize(particles.size());
+    if (rows) m_velocityRows.resize(particles.size());
     forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::pressureChange(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
-                               m_positionRows.data(), s.data(), ctx.dt, out.data());
+                               m_positionRows.data(), s.data(), ctx.dt, out.data(),
+                               rows ? m_velocityRows.data() : nullptr);
     });
 }
 
@@ -225,8 +231,8 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     // the pass after them scales it. Every pass over the particles also takes the sums the next decision needs: at
     // 8k particles the vector passes around the sweeps cost about as much as the sweeps when each had its own loop.
     auto multiply = [&](const std::vector<Real>& d) {
-        velocityChanges(ctx, particles, d, dv);
-        rates(ctx, particles, dv, false, q);
+        velocityChanges(ctx, particles, d, dv, true);
+        ratesOfRows(ctx, n, false, q);
         ++products;
     };
     // D_i = dt^2 A_ii; particles without neighbours (factor 0) take no pressure.

@@ -46,10 +46,13 @@ private:
     // system's product leaves them out).
     void rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u, bool withBodies,
                std::vector<Real>& out);
+    // The same for the velocities already in m_velocityRows.
+    void ratesOfRows(const StepContext& ctx, std::size_t n, bool withBodies, std::vector<Real>& out) const;
     // -dt (sum_j m_j (s_i + s_j) grad W_ij + kWall sum_k Psi_k s_i grad W_ik): every particle's velocity change from
-    // the pressures s (kappa / rho); the boundary mirrors the particle's own pressure [AIA+12, BK17].
+    // the pressures s (kappa / rho); the boundary mirrors the particle's own pressure [AIA+12, BK17]. With rows, also
+    // into m_velocityRows, for ratesOfRows.
     void velocityChanges(const StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s,
-                         std::vector<Vec3>& out) const;
+                         std::vector<Vec3>& out, bool rows = false);
     // Adds the impulse the pressures `s` gave through the boundary to each body's load.
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const;
     // Whether a solve with this mean residual stops after `iteration` iterations (the tolerance reached and the
