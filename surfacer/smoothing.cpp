@@ -129,8 +129,8 @@ inline unsigned pastBand(const float* row, float band) {
 }
 
 // Passes over the band's active voxels while its topology stays as it is. Each leaf's 26 neighbours are found once
-// per topology, not once per pass, and the passes alternate between the leaves' own buffers and one array of the same
-// size, kept from one topology to the next: no pass allocates or copies leaf buffers (OpenVDB's LeafManager gives
+// per topology, not once per pass, and the passes alternate between the leaves' own buffers and a second set of
+// values, kept from one topology to the next: no pass allocates or copies leaf buffers (OpenVDB's LeafManager gives
 // each leaf a second buffer and copies the values into it).
 class BandPasses {
 public:
