@@ -326,7 +326,8 @@ FloatGrid::Ptr kernelSum(const std::vector<Ellipsoid>& kernels, const KernelBins
                          float settleBelow = -std::numeric_limits<float>::infinity()) {
     const CubicSpline w(kKernelSupport * r);
     const float scale = float(8 * r * r * r * w.W0());
-    return gatherRows(kernels, binned, targets, w.supportRadius(), float(iso), ShapeSum(scale, float(iso), settleBelow));
+    return gatherRows(kernels, binned, targets, w.supportRadius(), float(iso),
+                      ShapeSum(scale, float(iso), settleBelow));
 }
 
 // Zhu & Bridson's field: the distance to the weighted mean of the particles within the search radius, less the
@@ -578,8 +579,8 @@ namespace {
 // the particles: the field (field(spacing, far, settleBelow) for a lattice's spacing, the value where no kernel
 // reaches, and the value below which it only matters that a value lies below it) on the coarse lattice, where only
 // the sign matters, then on the fine one near the bricks whose corners lie on both sides of the surface, where every
-// value past the band's inner edge ends as its half width. (Inside, these fields stay near minus a particle's size instead of growing like a distance, so the band
-// cannot be chosen by their values.)
+// value past the band's inner edge ends as its half width. (Inside, these fields stay near minus a particle's size
+// instead of growing like a distance, so the band cannot be chosen by their values.)
 template <class MakeField>
 FloatGrid::Ptr bandNearSurface(const std::vector<Vec3>& x, Real support, Real voxel, Real halfBand, MakeField&& field) {
     std::vector<Ellipsoid> kernels(x.size());

@@ -37,7 +37,8 @@ private:
     float m_values[10][10][10];
 };
 
-/// Takes the leaf's active voxels at or past `band` (a distance) out of the band, their values clamped to -band or band.
+/// Takes the leaf's active voxels at or past `band` (a distance) out of the band, their values clamped to -band or
+/// band.
 void trimLeaf(FloatLeaf& leaf, float band);
 
 /// Yu & Turk's anisotropic kernels (see surfacer.h): the narrow-band level set of half-width halfBand voxels

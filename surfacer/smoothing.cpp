@@ -134,13 +134,20 @@ inline unsigned pastBand(const float* row, float band) {
 // each leaf a second buffer and copies the values into it).
 class BandPasses {
 public:
-    // Finds the band's leaves and each one's neighbours (again, after the band's topology changed); the values are
-    // in the leaves' buffers.
-    void survey(openvdb::FloatTree& tree) {
+    // One layer more around the band, then its leaves and each one's neighbours; the values are in the leaves'
+    // buffers. The smoothing and the offset widen the band before each step and its renormalisation: the layer keeps
+    // the band's edge, whose outer neighbours hold the background, a voxel further from the surface; without it the
+    // edge's error reached the surface within two smoothing passes (15 % more folded edges in the default scene's
+    // adaptive meshes). Its voxels hold the band's half width (with the sign), which no voxel inside it does, and
+    // the step before the renormalisation leaves them so (Options::inner, or a move of the values inside the band
+    // only).
+    void widen(openvdb::FloatGrid& grid) {
+        openvdb::FloatTree& tree = grid.tree();
+        openvdb::tools::dilateActiveValues(tree, 1, openvdb::tools::NN_FACE, openvdb::tools::IGNORE_TILES);
         m_tree = &tree;
         openvdb::tree::LeafManager<openvdb::FloatTree> leaves(tree);  // finds the leaves in parallel
         const std::size_t n = leaves.leafCount();
-        // Kept from one survey to the next. The second values come in blocks of a few leaves, small enough to come
+        // Kept from one widening to the next. The second values come in blocks of a few leaves, small enough to come
         // from the heap's free memory (the level set builders' leaves and kernels, just freed) instead of fresh pages,
         // which would add to the frame's peak; left as they come, since the passes write them first.
         m_leaves.resize(n);
@@ -294,15 +301,6 @@ auto renormalising(const openvdb::FloatGrid& grid) {
     return [voxel = float(grid.voxelSize()[0])](const Rows& p) { return renormaliseStep(p, voxel); };
 }
 
-// The band one layer wider before a step and its renormalisation: the layer keeps the band's edge, whose outer
-// neighbours hold the background, a voxel further from the surface; without it the edge's error reached the surface
-// within two smoothing passes (15 % more folded edges in the default scene's adaptive meshes). Added first, its voxels
-// hold their values from outside the band (the half width itself, with the sign), and the step that comes before the
-// renormalisation leaves them so (BandPasses::Options::inner, or a move of the values inside the band only).
-void widenBand(openvdb::FloatGrid& grid) {
-    openvdb::tools::dilateActiveValues(grid.tree(), 1, openvdb::tools::NN_FACE, openvdb::tools::IGNORE_TILES);
-}
-
 }  // namespace
 
 void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes) {
@@ -310,8 +308,7 @@ void smoothLevelSet(openvdb::FloatGrid& grid, std::int64_t passes) {
     const float band = grid.background();
     BandPasses sweeps;
     for (std::int64_t pass = 0; pass < passes; ++pass) {
-        widenBand(grid);
-        sweeps.survey(grid.tree());
+        sweeps.widen(grid);
         sweeps.pass(curvatureStep, {band, /*move*/ 0, /*inner*/ true, /*trim*/ false});
         sweeps.pass(renormalising(grid), {band, /*move*/ 0, /*inner*/ false, /*trim*/ true, /*facesOnly*/ true});
         sweeps.finish();
@@ -330,8 +327,7 @@ void offsetLevelSet(openvdb::FloatGrid& grid, float distance) {
     const float step = distance / float(std::max(moves, 1));
     BandPasses sweeps;
     for (int move = 0; move < moves; ++move) {
-        widenBand(grid);
-        sweeps.survey(grid.tree());
+        sweeps.widen(grid);
         sweeps.pass(renormalising(grid), {band, step, /*inner*/ false, /*trim*/ false, /*facesOnly*/ true});
         sweeps.pass(renormalising(grid), {band, /*move*/ 0, /*inner*/ false, /*trim*/ true, /*facesOnly*/ true});
         sweeps.finish();

@@ -5,8 +5,8 @@
 // Three ways to turn particles into a level set (scene key surface.method):
 //  - spheres: a sphere of 2.5 r around every particle, large enough to leave no bubble between disordered
 //    particles (their union's distance evaluated near the surface only), then moved inward by 1.36 r (the
-//    level-set offset of smoothing.cpp) so that a flat layer's surface sits about r above its top particles (where the lattice
-//    cells end);
+//    level-set offset of smoothing.cpp) so that a flat layer's surface sits about r above its top particles (where
+//    the lattice cells end);
 //  - smooth_spheres: Zhu & Bridson 2005: distance to the weighted average of the neighbours within 2.7 r, less
 //    0.9 r, which fills the dips between spheres; evaluated only near the surface, like the anisotropic kernels;
 //  - anisotropic: Yu & Turk 2013: each particle's kernel (support 4 r) stretched along its neighbours' spread
