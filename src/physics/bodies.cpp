@@ -111,4 +111,15 @@ std::vector<BoundaryBody> BoundaryParticles::movingBodies() const {
     return out;
 }
 
+std::vector<BoundaryBody> BoundaryParticles::movingBodies(Real t) const {
+    std::vector<BoundaryBody> out = movingBodies();
+    std::vector<std::size_t> next(names.size(), 0);
+    for (std::size_t k = 0; k < x.size() && anyMoving; ++k) {
+        const BodyMotion& m = motion[body[k]];
+        Vec3& xk = out[body[k]].x[next[body[k]]++];
+        if (!m.isStatic()) xk = m.transform(x0[k], t);
+    }
+    return out;
+}
+
 }  // namespace ganache

@@ -363,6 +363,36 @@ void Simulation::divergenceFree(StepContext& ctx) {
     checkFinite("divergence-free");
 }
 
+bool Simulation::advancePast(Real t, const std::function<bool()>& keepGoing) {
+    const bool viscous = !m_stages[std::size_t(Stage::Viscosity)].empty();
+    if (viscous && m_order.kind != ViscosityOrder::Kind::Predicted) return advanceTo(t, keepGoing);
+    // Ending a step on every frame cost buckling's anchor 235 steps a second instead of 219 (24 frames).
+    while (t - m_time > 1e-12 * std::max<Real>(1, std::abs(t))) {
+        if (keepGoing && !keepGoing()) return false;
+        step();
+    }
+    return true;
+}
+
+void Simulation::writeAt(Real t, const FrameWriter& write) {
+    const Real back = m_time - t;
+    if (!(back > 0)) {
+        write(m_fluid, m_boundary.movingBodies());
+        return;
+    }
+    // The positions at t in place of the step's end for the write, then the end's restored to the bit.
+    auto& x = m_fluid.x();
+    const auto& v = m_fluid.v();
+    std::vector<Vec3> end = x;
+    struct Restore {
+        std::vector<Vec3>& x;
+        std::vector<Vec3>& end;
+        ~Restore() { x.swap(end); }
+    } restore{x, end};
+    forEachParticle(x.size(), [&](std::size_t i) { x[i] -= back * v[i]; }, 4096);
+    write(m_fluid, m_boundary.movingBodies(t));
+}
+
 bool Simulation::advanceTo(Real t, const std::function<bool()>& keepGoing) {
     while (t - m_time > 1e-12 * std::max<Real>(1, std::abs(t))) {
         if (keepGoing && !keepGoing()) return false;

@@ -112,6 +112,14 @@ public:
     /// Steps until the time reaches t exactly; the last two steps share what is left, so none is a sliver.
     /// Before each step it asks `keepGoing` (when given) and returns false as soon as that says no.
     bool advanceTo(Real t, const std::function<bool()>& keepGoing = {});
+    /// Steps until the time reaches t or has just passed it, each step as long as the time step settings allow, so
+    /// that where frames fall changes no step; writeAt() gives the fluid at t. With the paper's or the coupled order
+    /// the velocity at a step's end is not the one it moved with: those land on t as advanceTo() does.
+    bool advancePast(Real t, const std::function<bool()>& keepGoing = {});
+    /// Calls write with the fluid and the moving bodies as they were at time t within the last step: each particle
+    /// on the straight path the step moved it along (x - (time() - t) v), every other attribute as at the step's end.
+    using FrameWriter = std::function<void(const ParticleSet& fluid, const std::vector<BoundaryBody>& movingBodies)>;
+    void writeAt(Real t, const FrameWriter& write);
 
     /// The state to save, and the way back to it: restore() takes a simulation built from the same set-up and
     /// sample to the saved moment; std::runtime_error when the state is not of this simulation.

@@ -112,16 +112,17 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     const FrameRange& fr = scene.frames;
     if (scene.exportPly) fs::create_directories(layout.points(frames.first).parent_path());
     std::size_t written = 0;
+    // A frame is written from the step that reaches or passes its time (Simulation::advancePast, writeAt).
     auto writeFrame = [&](std::int64_t f) {
         if (f < frames.first || f > frames.second) return;
         ++written;
-        const CacheInfo info{scene.name, f, sim.time(), fr.fps, scene.particleRadius};
-        writeParticleCache(layout.particles(f), sim.particles(), sim.boundary().movingBodies(), info);
+        const CacheInfo info{scene.name, f, fr.timeOf(f), fr.fps, scene.particleRadius};
+        sim.writeAt(fr.timeOf(f), [&](const ParticleSet& fluid, const std::vector<BoundaryBody>& bodies) {
+            writeParticleCache(layout.particles(f), fluid, bodies, info);
+            if (scene.exportPly) writeParticlePly(layout.points(f), fluid, info);
+        });
         stage.outputs.push_back(layout.particles(f).string());
-        if (scene.exportPly) {
-            writeParticlePly(layout.points(f), sim.particles(), info);
-            stage.outputs.push_back(layout.points(f).string());
-        }
+        if (scene.exportPly) stage.outputs.push_back(layout.points(f).string());
     };
     std::int64_t next = fr.start + 1;
     if (from) {
@@ -144,7 +145,7 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
     double checkpointSeconds = 0;
     Progress progress("simulate", std::size_t(std::max<std::int64_t>(0, frames.second - next + 1)));
     for (std::int64_t f = next; f <= frames.second; ++f) {
-        if (!sim.advanceTo(fr.timeOf(f), keepGoing)) {
+        if (!sim.advancePast(fr.timeOf(f), keepGoing)) {
             const int signal = InterruptGuard::received();
             const fs::path saved = saveCheckpoint(scene, layout, sim, f - 1);
             stage.status = "interrupted";
@@ -164,7 +165,9 @@ void runSimulate(const Scene& scene, const OutputLayout& layout, std::pair<std::
         progress.update(std::size_t(f - next + 1));
     }
     progress.finish();
-    report.setSimulation(sim.stats(), sim.time(), sim.effectSummaries(), sim.particles().size());
+    // The frames' time: the last step may pass the last frame by less than a step.
+    report.setSimulation(sim.stats(), std::min(sim.time(), fr.timeOf(frames.second)), sim.effectSummaries(),
+                         sim.particles().size());
     report.setBodies(sim.boundary().names, sim.bodyReports());
     if (const auto* emitters = sim.findEffect<Emitters>()) report.setEmitters(emitters->reports());
     stage.seconds = clock.seconds();
