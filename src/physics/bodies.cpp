@@ -100,24 +100,14 @@ void BoundaryParticles::moveTo(Real t) {
     }
 }
 
-std::vector<BoundaryBody> BoundaryParticles::movingBodies() const {
+std::vector<BoundaryBody> BoundaryParticles::movingBodies(std::optional<Real> t) const {
     std::vector<BoundaryBody> out;
     if (!anyMoving) return out;
     for (std::size_t b = 0; b < names.size(); ++b) out.push_back({names[b], {}, {}});
     for (std::size_t k = 0; k < x.size(); ++k) {
-        out[body[k]].x.push_back(x[k]);
-        out[body[k]].volume.push_back(volume[k]);
-    }
-    return out;
-}
-
-std::vector<BoundaryBody> BoundaryParticles::movingBodies(Real t) const {
-    std::vector<BoundaryBody> out = movingBodies();
-    std::vector<std::size_t> next(names.size(), 0);
-    for (std::size_t k = 0; k < x.size() && anyMoving; ++k) {
         const BodyMotion& m = motion[body[k]];
-        Vec3& xk = out[body[k]].x[next[body[k]]++];
-        if (!m.isStatic()) xk = m.transform(x0[k], t);
+        out[body[k]].x.push_back(t && !m.isStatic() ? m.transform(x0[k], *t) : x[k]);
+        out[body[k]].volume.push_back(volume[k]);
     }
     return out;
 }

@@ -72,8 +72,7 @@ struct BoundaryParticles {
     }
     /// The particles of the moving bodies, body by body (particle caches carry them; static ones are in the sample),
     /// where they are now or, given a time, where their motion has them then.
-    std::vector<BoundaryBody> movingBodies() const;
-    std::vector<BoundaryBody> movingBodies(Real t) const;
+    std::vector<BoundaryBody> movingBodies(std::optional<Real> t = {}) const;
 };
 
 /// The fluid's push on each body during one step, as impulses [N s] and angular impulses [N m s] about the body's

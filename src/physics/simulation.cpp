@@ -367,7 +367,7 @@ bool Simulation::advancePast(Real t, const std::function<bool()>& keepGoing) {
     const bool viscous = !m_stages[std::size_t(Stage::Viscosity)].empty();
     if (viscous && m_order.kind != ViscosityOrder::Kind::Predicted) return advanceTo(t, keepGoing);
     // Ending a step on every frame cost buckling's anchor 235 steps a second instead of 219 (24 frames).
-    while (t - m_time > 1e-12 * std::max<Real>(1, std::abs(t))) {
+    while (!reached(t)) {
         if (keepGoing && !keepGoing()) return false;
         step();
     }
@@ -394,7 +394,7 @@ void Simulation::writeAt(Real t, const FrameWriter& write) {
 }
 
 bool Simulation::advanceTo(Real t, const std::function<bool()>& keepGoing) {
-    while (t - m_time > 1e-12 * std::max<Real>(1, std::abs(t))) {
+    while (!reached(t)) {
         if (keepGoing && !keepGoing()) return false;
         const Real left = t - m_time;
         const Real dt = chooseDt(left, cflStep());

@@ -120,6 +120,8 @@ public:
     /// on the straight path the step moved it along (x - (time() - t) v), every other attribute as at the step's end.
     using FrameWriter = std::function<void(const ParticleSet& fluid, const std::vector<BoundaryBody>& movingBodies)>;
     void writeAt(Real t, const FrameWriter& write);
+    /// Whether the time has reached t (to round-off).
+    bool reached(Real t) const { return t - m_time <= 1e-12 * std::max<Real>(1, std::abs(t)); }
 
     /// The state to save, and the way back to it: restore() takes a simulation built from the same set-up and
     /// sample to the saved moment; std::runtime_error when the state is not of this simulation.
