@@ -3,6 +3,7 @@
 
 #include "app/interrupt.h"
 #include "core/errors.h"
+#include "core/memory.h"
 #include "farm/farm.h"
 #include "pipeline/pipeline.h"
 #include "tools/study/study.h"
@@ -15,6 +16,7 @@
 
 int main(int argc, char** argv) {
     using namespace ganache;
+    keepFreedMemory();
     CLI::App app{"ganache: offline simulation of highly viscous and melting fluids.\n"
                  "Stages: sample -> simulate -> surface -> render; `run` does every stage the scene asks for."};
     app.require_subcommand(1);
