@@ -20,6 +20,7 @@
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tree/LeafManager.h>
+#include <tbb/enumerable_thread_specific.h>
 
 #include <algorithm>
 #include <array>
@@ -60,9 +61,13 @@ Eigen::Vector3f extentAbove(const Vec3& extent) {
 
 // Each particle's kernel from the spread of its neighbours within the support. The sums the spread needs are
 // taken in one pass over the 27 grid cells around the particle's own, without storing neighbour lists (which cost
-// as much again as the sums at 1M particles).
+// as much again as the sums at 1M particles). The 27 cells' points are gathered once for the particles of a cell and
+// tested 64 at a time, so that only the neighbours are visited (a branch per candidate went the wrong way often).
 std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     const Real support = kKernelSupport * r, support2 = support * support, inverseCube = 1 / (support2 * support);
+    // The test lets through at least every candidate within the support (it may round differently from the sums'
+    // own distance, which decides).
+    const Real candidate2 = support2 * (1 + 1e-12);
     UniformGrid grid(support);
     grid.build(x);
     grid.releaseWorkingMemory();
@@ -70,41 +75,64 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     const std::vector<Real>& sy = grid.sortedCoords(1);
     const std::vector<Real>& sz = grid.sortedCoords(2);
     std::vector<Ellipsoid> out(x.size());
+    struct Candidates {
+        std::vector<Real> x, y, z;
+        std::vector<std::uint32_t> at;  // position in the grid's sorted order
+    };
+    tbb::enumerable_thread_specific<Candidates> scratch;
     forEachBlock(grid.cellCount(), [&](std::size_t begin, std::size_t end) {
+        Candidates& cand = scratch.local();
         for (std::size_t c = begin; c != end; ++c) {
-            std::array<std::pair<std::size_t, std::size_t>, 27> around;
-            std::size_t cells = 0;
             const auto& k = grid.cellCoords(c);
+            std::size_t from[27], to[27], count = 0;
+            int cells = 0;
             for (int a = -1; a <= 1; ++a)
                 for (int b = -1; b <= 1; ++b)
                     for (int d = -1; d <= 1; ++d) {
                         const std::int64_t found = grid.findCell(k[0] + a, k[1] + b, k[2] + d);
                         if (found < 0) continue;
-                        const std::size_t cell = std::size_t(found);
-                        around[cells++] = {grid.cellBegin(cell), grid.cellBegin(cell + 1)};
+                        from[cells] = grid.cellBegin(std::size_t(found));
+                        to[cells] = grid.cellBegin(std::size_t(found) + 1);
+                        count += to[cells] - from[cells];
+                        ++cells;
                     }
+            const std::size_t room = (count + 63) / 64 * 64;
+            if (cand.at.size() < room)
+                cand.x.resize(room), cand.y.resize(room), cand.z.resize(room), cand.at.resize(room);
+            std::size_t put = 0;
+            for (int n = 0; n != cells; ++n)
+                for (std::size_t t = from[n]; t != to[n]; ++t, ++put)
+                    cand.x[put] = sx[t], cand.y[put] = sy[t], cand.z[put] = sz[t], cand.at[put] = std::uint32_t(t);
+            for (; put != room; ++put)  // too far for any test
+                cand.x[put] = cand.y[put] = cand.z[put] = std::numeric_limits<Real>::max();
+            const std::size_t words = (count + 63) / 64;
             for (std::size_t s = grid.cellBegin(c); s != grid.cellBegin(c + 1); ++s) {
                 // Weighted sums over the neighbourhood, itself included, w = 1 - (d / support)^3, of the offsets
                 // from the particle and of their products (the covariance about the weighted mean follows).
                 Real total = 1, m[3] = {0, 0, 0}, q[6] = {0, 0, 0, 0, 0, 0};
-                std::size_t count = 0;
-                for (std::size_t n = 0; n != cells; ++n)
-                    for (std::size_t t = around[n].first; t != around[n].second; ++t) {
-                        const Real dx = sx[t] - sx[s], dy = sy[t] - sy[s], dz = sz[t] - sz[s];
+                std::size_t neighbours = 0;
+                for (std::size_t w = 0; w != words; ++w) {
+                    const std::size_t base = 64 * w;
+                    for (std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base,
+                                                       cand.z.data() + base, sx[s], sy[s], sz[s], candidate2);
+                         bits; bits &= bits - 1) {
+                        const std::size_t n = base + std::size_t(__builtin_ctzll(bits));
+                        const Real dx = cand.x[n] - sx[s], dy = cand.y[n] - sy[s], dz = cand.z[n] - sz[s];
                         const Real d2 = dx * dx + dy * dy + dz * dz;
-                        if (d2 >= support2 || t == s) continue;
-                        const Real w = 1 - d2 * std::sqrt(d2) * inverseCube;
-                        ++count;
-                        total += w;
-                        m[0] += w * dx, m[1] += w * dy, m[2] += w * dz;
-                        q[0] += w * dx * dx, q[1] += w * dy * dy, q[2] += w * dz * dz;
-                        q[3] += w * dx * dy, q[4] += w * dx * dz, q[5] += w * dy * dz;
+                        if (d2 >= support2 || cand.at[n] == s) continue;
+                        const Real weight = 1 - d2 * std::sqrt(d2) * inverseCube;
+                        ++neighbours;
+                        total += weight;
+                        m[0] += weight * dx, m[1] += weight * dy, m[2] += weight * dz;
+                        q[0] += weight * dx * dx, q[1] += weight * dy * dy, q[2] += weight * dz * dz;
+                        q[3] += weight * dx * dy, q[4] += weight * dx * dz, q[5] += weight * dy * dz;
                     }
+                }
                 const std::uint32_t i = grid.sortedIndices()[s];
                 Ellipsoid& e = out[i];
                 e.centre = x[i];
                 Mat3 shape = Mat3::Identity();
-                if (count >= kMinNeighbours) {
+                if (neighbours >= kMinNeighbours) {
                     const Vec3 mean = Vec3(m[0], m[1], m[2]) / total;
                     Mat3 covariance;
                     covariance << q[0], q[3], q[4], q[3], q[1], q[5], q[4], q[5], q[2];

@@ -39,9 +39,9 @@ std::uint64_t mortonKey(std::int64_t cx, std::int64_t cy, std::int64_t cz) {
 
 std::uint64_t hashSlot(std::uint64_t key, int bits) { return (key * 0x9E3779B97F4A7C15ULL) >> (64 - bits); }
 
-// Bit b of the result: whether candidate b of the 64 from x, y, z lies closer than sqrt(r2) to (xi, yi, zi). The
-// arrays hold 64 values (past the last candidate, values too far for any test). The same squared distance in both
-// versions, so the same neighbours.
+}  // namespace
+
+// The same squared distance in both versions, so the same neighbours.
 std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Real yi, Real zi, Real r2) {
     std::uint64_t bits = 0;
 #if defined(__AVX2__)
@@ -62,7 +62,6 @@ std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Rea
     return bits;
 }
 
-}  // namespace
 
 void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
                std::vector<std::pair<std::uint64_t, std::uint32_t>>& scratch) {

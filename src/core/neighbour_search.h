@@ -102,6 +102,10 @@ private:
 void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
                std::vector<std::pair<std::uint64_t, std::uint32_t>>& scratch);
 
+/// Bit b of the result: whether candidate b of the 64 from x, y, z lies closer than sqrt(r2) to (xi, yi, zi). The
+/// arrays hold 64 values (past the last candidate, values too far for any test).
+std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Real yi, Real zi, Real r2);
+
 /// Finds, for every query point i, the target points j with |x_i - x_j| < radius. With sameSet the query
 /// and target are one set and i is not its own neighbour. Both grids must have cell size >= radius and be
 /// built from queryX and targetX respectively.
