@@ -62,7 +62,6 @@ std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Rea
     return bits;
 }
 
-
 void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
                std::vector<std::pair<std::uint64_t, std::uint32_t>>& scratch) {
     // Least significant byte first, each pass stable, so that equal keys keep the order they came in; a byte in which
