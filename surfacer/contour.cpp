@@ -506,33 +506,46 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     // A cell is named by its first corner, which may lie in a tile below a leaf where the band is thinner than a
     // voxel (a trimmed band, a thread): the leaves below the tree's that it lacks are stood in for by leaves of their
     // tile's value, so that such cells get vertices too.
-    std::set<openvdb::Coord> missing;
-    openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> probe(tree);
-    for (const FloatLeaf* leaf : leaves)
-        for (int n = 1; n < 8; ++n) {
-            const openvdb::Coord o = leaf->origin().offsetBy(-kLeaf * cornerOffset(n, 0), -kLeaf * cornerOffset(n, 1),
-                                                             -kLeaf * cornerOffset(n, 2));
-            if (!probe.probeConstLeaf(o)) missing.insert(o);
+    std::vector<std::vector<openvdb::Coord>> missingBelow(leaves.size());
+    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
+        openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> probe(tree);
+        for (std::size_t l = begin; l != end; ++l)
+            for (int n = 1; n < 8; ++n) {
+                const openvdb::Coord o = leaves[l]->origin().offsetBy(
+                    -kLeaf * cornerOffset(n, 0), -kLeaf * cornerOffset(n, 1), -kLeaf * cornerOffset(n, 2));
+                if (!probe.probeConstLeaf(o)) missingBelow[l].push_back(o);
+            }
+    }, 64);
+    std::vector<openvdb::Coord> missing;
+    for (const auto& below : missingBelow) missing.insert(missing.end(), below.begin(), below.end());
+    missingBelow = {};
+    std::sort(missing.begin(), missing.end());
+    missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
+    // Only where a voxel of the leaves above, next to this tile, lies on the other side of the surface.
+    std::vector<std::uint8_t> crossed(missing.size(), 0);
+    forEachBlock(missing.size(), [&](std::size_t begin, std::size_t end) {
+        openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> probe(tree);
+        for (std::size_t m = begin; m != end; ++m) {
+            const openvdb::Coord& o = missing[m];
+            const bool inside = probe.getValue(o) < 0;
+            for (int n = 1; n < 8 && !crossed[m]; ++n) {
+                const FloatLeaf* above = probe.probeConstLeaf(
+                    o.offsetBy(kLeaf * cornerOffset(n, 0), kLeaf * cornerOffset(n, 1), kLeaf * cornerOffset(n, 2)));
+                if (!above) continue;
+                // Its voxels at local coordinate 0 along the axes it is offset on.
+                const int upTo[3] = {cornerOffset(n, 0) ? 1 : kLeaf, cornerOffset(n, 1) ? 1 : kLeaf,
+                                     cornerOffset(n, 2) ? 1 : kLeaf};
+                for (int i = 0; i < upTo[0] && !crossed[m]; ++i)
+                    for (int j = 0; j < upTo[1] && !crossed[m]; ++j)
+                        for (int k = 0; k < upTo[2] && !crossed[m]; ++k)
+                            crossed[m] = (above->getValue(openvdb::Index(i * 64 + j * 8 + k)) < 0) != inside;
+            }
         }
+    }, 64);
     std::vector<std::unique_ptr<FloatLeaf>> standIns;
-    for (const openvdb::Coord& o : missing) {
-        // Only where a voxel of the leaves above, next to this tile, lies on the other side of the surface.
-        const bool inside = tree.getValue(o) < 0;
-        bool crossed = false;
-        for (int n = 1; n < 8 && !crossed; ++n) {
-            const FloatLeaf* above = probe.probeConstLeaf(
-                o.offsetBy(kLeaf * cornerOffset(n, 0), kLeaf * cornerOffset(n, 1), kLeaf * cornerOffset(n, 2)));
-            if (!above) continue;
-            // Its voxels at local coordinate 0 along the axes it is offset on.
-            const int end[3] = {cornerOffset(n, 0) ? 1 : kLeaf, cornerOffset(n, 1) ? 1 : kLeaf,
-                                cornerOffset(n, 2) ? 1 : kLeaf};
-            for (int i = 0; i < end[0] && !crossed; ++i)
-                for (int j = 0; j < end[1] && !crossed; ++j)
-                    for (int k = 0; k < end[2] && !crossed; ++k)
-                        crossed = (above->getValue(openvdb::Index(i * 64 + j * 8 + k)) < 0) != inside;
-        }
-        if (!crossed) continue;
-        standIns.push_back(std::make_unique<FloatLeaf>(o, tree.getValue(o)));
+    for (std::size_t m = 0; m < missing.size(); ++m) {
+        if (!crossed[m]) continue;
+        standIns.push_back(std::make_unique<FloatLeaf>(missing[m], tree.getValue(missing[m])));
         leaves.push_back(standIns.back().get());
     }
     const bool adapt = adaptivity > 0;
@@ -544,6 +557,8 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     // again once those faces are flipped.
     const auto& table = pieceTable();
     std::vector<LeafVertices> vertices(leaves.size());
+    // The configurations of the leaves with vertices, for the faces below (signs do not change on a flip).
+    std::vector<std::unique_ptr<const Configs>> configsOf(leaves.size());
     std::vector<std::vector<std::pair<openvdb::Coord, int>>> tunnels(leaves.size());
     const FlippedFaces none;
     forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
@@ -551,7 +566,8 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
         for (std::size_t l = begin; l != end; ++l) {
             at.gather(*leaves[l]);
             const Values values{at};
-            const Configs configs(values);
+            auto configsOwned = std::make_unique<const Configs>(values);
+            const Configs& configs = *configsOwned;
             const openvdb::Coord o = leaves[l]->origin();
             leafVertices(values, configs, o, none, maxAngle, maxDeviation, adapt, vertices[l]);
             for (int i = 0; i < kLeaf; ++i)
@@ -566,6 +582,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
                                 tunnels[l].emplace_back(o.offsetBy(q[0], q[1], q[2]), a);
                         }
                     }
+            if (!vertices[l].x.empty()) configsOf[l] = std::move(configsOwned);
         }
     }, 16);
     FlippedFaces flipped;
@@ -615,13 +632,11 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     // Faces: each crossed edge starting at a leaf's voxel joins the four cells around it.
     std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(leaves.size());
     forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
-        LeafNeighbourhood at(tree);
         IdNeighbourhood id(ids);
         for (std::size_t l = begin; l != end; ++l) {
             if (offset[l + 1] == offset[l]) continue;
-            at.gather(*leaves[l]);
             id.gather(leaves[l]->origin());
-            const Configs configs(Values{at});
+            const Configs& configs = *configsOf[l];
             auto& out = faces[l];
             for (int i = 0; i < kLeaf; ++i)
                 for (int j = 0; j < kLeaf; ++j)
