@@ -257,8 +257,11 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                     // A y in supports at point (a, b, c) of the leaf: u0 + a dx + b dy + c dz.
                     const Mat3 shape = e.shape.cast<Real>();
                     const Mat3 m = shape * (h / support);
-                    const Vec3 u0d = shape * (lo - e.centre) / support;
-                    const float u0[3] = {float(u0d.x()), float(u0d.y()), float(u0d.z())};
+                    const Vec3 offset = lo - e.centre;
+                    float u0[3];
+                    for (int d = 0; d < 3; ++d)  // (shape offset) / support, written out: Eigen called a function here
+                        u0[d] = float((shape(d, 0) * offset.x() + shape(d, 1) * offset.y() + shape(d, 2) * offset.z()) /
+                                      support);
                     const float dx[3] = {float(m(0, 0)), float(m(1, 0)), float(m(2, 0))};
                     const float dy[3] = {float(m(0, 1)), float(m(1, 1)), float(m(2, 1))};
                     const float dz[3] = {float(m(0, 2)), float(m(1, 2)), float(m(2, 2))};
