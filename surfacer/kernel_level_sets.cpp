@@ -228,7 +228,7 @@ template <class Field>
 FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
                           const std::vector<LatticeLeaf>& targets, Real support, float background,
                           const Field& prototype) {
-    const Real h = binned.h, cell = 8 * h;
+    const Real h = binned.h, cell = 8 * h, inverseH = 1 / h;
     const Vec3& reach = binned.reach;
     const UniformGrid& bins = binned.grid;
     std::vector<FloatLeaf*> made(targets.size(), nullptr);
@@ -249,8 +249,10 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                     const Ellipsoid& e = kernels[bins.sortedIndices()[k]];
                     // The kernel's box in the leaf's point indices (0..7).
                     const Vec3 extent = e.extent.cast<Real>();
-                    const Vec3 boxLo = ((e.centre - extent - lo) / h).array().ceil();
-                    const Vec3 boxHi = ((e.centre + extent - lo) / h).array().floor();
+                    // (A box a point wider where a product rounds the other way adds only zeros: the kernel vanishes
+                    // at its box's faces, which lie outside its ellipsoid.)
+                    const Vec3 boxLo = ((e.centre - extent - lo) * inverseH).array().ceil();
+                    const Vec3 boxHi = ((e.centre + extent - lo) * inverseH).array().floor();
                     if ((boxLo.array() > 7).any() || (boxHi.array() < 0).any()) continue;
                     const int aLo = std::max(0, int(boxLo.x())), aHi = std::min(7, int(boxHi.x()));
                     const int bLo = std::max(0, int(boxLo.y())), bHi = std::min(7, int(boxHi.y()));
