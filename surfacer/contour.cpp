@@ -566,8 +566,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
         for (std::size_t l = begin; l != end; ++l) {
             at.gather(*leaves[l]);
             const Values values{at};
-            auto configsOwned = std::make_unique<const Configs>(values);
-            const Configs& configs = *configsOwned;
+            const Configs configs(values);
             const openvdb::Coord o = leaves[l]->origin();
             leafVertices(values, configs, o, none, maxAngle, maxDeviation, adapt, vertices[l]);
             for (int i = 0; i < kLeaf; ++i)
@@ -582,7 +581,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
                                 tunnels[l].emplace_back(o.offsetBy(q[0], q[1], q[2]), a);
                         }
                     }
-            if (!vertices[l].x.empty()) configsOf[l] = std::move(configsOwned);
+            if (!vertices[l].x.empty()) configsOf[l] = std::make_unique<const Configs>(configs);
         }
     }, 16);
     FlippedFaces flipped;
