@@ -1,5 +1,7 @@
 #include "core/neighbour_search.h"
 
+#include "core/memory.h"
+
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
@@ -298,7 +300,7 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     out.offsets.resize(n + 1);
     out.offsets[0] = 0;
     for (std::size_t i = 0; i < n; ++i) out.offsets[i + 1] = out.offsets[i] + count[i];
-    out.indices.resize(out.offsets[n]);
+    resizeForRefill(out.indices, out.offsets[n]);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& range) {
         for (std::size_t i = range.begin(); i != range.end(); ++i) {
             const std::uint32_t* from = buffers[chunkOf[i]].data() + localStart[i];

@@ -2,6 +2,7 @@
 
 #include "core/attributes.h"
 #include "core/byte_stream.h"
+#include "core/memory.h"
 #include "core/parallel.h"
 #include "core/timing.h"
 #include "physics/gravity.h"
@@ -175,8 +176,8 @@ void Simulation::updateNeighbours(bool mayReorder) {
 void Simulation::computeDensities() {
     const std::size_t n = m_fluid.size();
     m_density.resize(n);
-    m_gradients.fluid.resize(m_fluidNeighbours.pairs());
-    m_gradients.boundary.resize(m_boundaryNeighbours.pairs());
+    resizeForRefill(m_gradients.fluid, m_fluidNeighbours.pairs());
+    resizeForRefill(m_gradients.boundary, m_boundaryNeighbours.pairs());
     const auto& x = m_fluid.x();
     const auto& m = m_fluid.mass();
     const auto& rho0 = *m_restDensity;

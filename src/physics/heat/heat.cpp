@@ -2,6 +2,7 @@
 
 #include "core/attributes.h"
 #include "core/byte_stream.h"
+#include "core/memory.h"
 #include "core/parallel.h"
 #include "physics/setup.h"
 #include "physics/simulation.h"
@@ -168,8 +169,8 @@ public:
         const auto conducts = [&](std::uint32_t k) { return !std::isnan(m_bodyTemperature[ctx.boundary.body[k]]); };
         m_rate.resize(n);
         m_diagonal.resize(n);
-        m_pair.resize(f.pairs());
-        m_boundaryPair.resize(b.pairs());
+        resizeForRefill(m_pair, f.pairs());
+        resizeForRefill(m_boundaryPair, b.pairs());
         const Real h2 = ctx.kernel.supportRadius() * ctx.kernel.supportRadius();
         forEachParticle(n, [&](std::size_t i) {
             const std::size_t si = source(i);

@@ -1,6 +1,7 @@
 #include "physics/pressure/pressure_dfsph.h"
 
 #include "core/attributes.h"
+#include "core/memory.h"
 #include "core/parallel.h"
 
 #include <fmt/format.h>
@@ -78,8 +79,8 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     const auto& f = ctx.fluidNeighbours;
     const auto& b = ctx.boundaryNeighbours;
     const Real h4 = std::pow(ctx.kernel.supportRadius(), 4);
-    m_weights.resize(f.pairs());
-    m_boundaryWeights.resize(b.pairs());
+    resizeForRefill(m_weights, f.pairs());
+    resizeForRefill(m_boundaryWeights, b.pairs());
     m_boundarySum.resize(n);
     m_bodyRate.resize(n);
     m_positionRows.resize(n);

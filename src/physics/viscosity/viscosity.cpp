@@ -2,6 +2,7 @@
 
 #include "core/attributes.h"
 #include "core/byte_stream.h"
+#include "core/memory.h"
 #include "core/parallel.h"
 #include "physics/setup.h"
 #include "physics/viscosity/viscosity_explicit.h"
@@ -167,8 +168,8 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
     const auto& f = ctx.fluidNeighbours;
     const auto& b = ctx.boundaryNeighbours;
     const Real h = ctx.kernel.supportRadius(), eps = 0.01 * h * h;
-    m_pairs.resize(f.pairs());
-    m_boundaryPairs.resize(sticky() ? b.pairs() : 0);
+    resizeForRefill(m_pairs, f.pairs());
+    resizeForRefill(m_boundaryPairs, sticky() ? b.pairs() : 0);
     m_fluidBlocks.resize(particles.size());
     const Real* rho = ctx.density.data();
     const Real* g = ctx.gradients.fluid.data();
