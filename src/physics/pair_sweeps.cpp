@@ -149,6 +149,13 @@ void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3
     viscousProductsOf<2>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
 }
 
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+                     const Row* in1, const Row* in2, const Row* in3, Real dt, Vec3* out1, Vec3* out2, Vec3* out3) {
+    const Row* const inputs[3] = {in1, in2, in3};
+    Vec3* const outputs[3] = {out1, out2, out3};
+    viscousProductsOf<3>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
+}
+
 // The pressure sweeps take one pair per vector, its lanes the coordinates, and add the lanes only at the end: their
 // pairs need no sum over coordinates in between (the viscous product's do, hence its groups of four pairs).
 void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Real* bodyRate,

@@ -41,6 +41,9 @@ void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const Mat3*
 /// viscousProduct for two inputs at once (one pass over the pairs): out1 = (I - dt A) in1, out2 = (I - dt A) in2.
 void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
                      const Row* in1, const Row* in2, Real dt, Vec3* out1, Vec3* out2);
+/// The same for three inputs.
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+                     const Row* in1, const Row* in2, const Row* in3, Real dt, Vec3* out1, Vec3* out2, Vec3* out3);
 
 /// For i in [begin, end): rate_i = sum_p w_p (u_i - u_j) . x_ij + u_i . S_i - c_i, a density rate Drho/Dt with
 /// w_p = m_j g_p, S_i = sum_q wb_q x_ik the boundary's weights summed once a step and c_i = sum_q wb_q ub_k . x_ik the

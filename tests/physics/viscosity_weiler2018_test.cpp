@@ -187,6 +187,52 @@ TEST(ViscosityWeiler2018, PreconditionerAndWarmStartCutIterations) {
     EXPECT_LE(clusters, rigid);
 }
 
+TEST(ViscosityWarmStart, LeastEnergyGuessIsNoWorseThanAnyFixedExtrapolation) {
+    // leastEnergyGuess minimises E(x) = x.Mx / 2 - b.x over x = v + a d1 + c d2, so its residual b - Mx is orthogonal
+    // to d1 and d2 and E is at most that of v, of the paper's warm start v + d1 and of the extrapolations from d1 and
+    // d2 (E differs from the squared M-norm distance to the solution by a constant). Also where d2 is parallel to d1.
+    constexpr int kParticles = 6, kSize = 3 * kParticles;
+    std::mt19937_64 rng(7);
+    std::normal_distribution<Real> normal(0, 1);
+    Eigen::MatrixXd spread(kSize, kSize);
+    for (int r = 0; r < kSize; ++r)
+        for (int c = 0; c < kSize; ++c) spread(r, c) = normal(rng);
+    const Eigen::MatrixXd m = Eigen::MatrixXd::Identity(kSize, kSize) + spread.transpose() * spread;
+    auto field = [&] {
+        std::vector<Vec3> f(kParticles);
+        for (auto& x : f) x = Vec3(normal(rng), normal(rng), normal(rng));
+        return f;
+    };
+    auto flat = [](const std::vector<Vec3>& f) {
+        return Eigen::Map<const Eigen::VectorXd>(f[0].data(), kSize).eval();
+    };
+    auto times = [&](const std::vector<Vec3>& f) {
+        std::vector<Vec3> out(kParticles);
+        Eigen::Map<Eigen::VectorXd>(out[0].data(), kSize) = m * flat(f);
+        return out;
+    };
+    const std::vector<Vec3> b = field(), v = field(), d1 = field();
+    auto energy = [&](Real a, const std::vector<Vec3>& d2, Real c) {
+        std::vector<Vec3> x(kParticles);
+        for (int i = 0; i < kParticles; ++i) x[i] = v[i] + a * d1[i] + c * d2[i];
+        return 0.5 * flat(x).dot(m * flat(x)) - flat(b).dot(flat(x));
+    };
+    std::vector<Vec3> parallel(kParticles);
+    for (int i = 0; i < kParticles; ++i) parallel[i] = 2 * d1[i];
+    for (const std::vector<Vec3>& d2 : {field(), parallel}) {
+        std::vector<Vec3> x(kParticles), mx(kParticles);
+        leastEnergyGuess(b, v, times(v), d1, times(d1), d2, times(d2), x, mx);
+        const Eigen::VectorXd residual = flat(b) - m * flat(x);
+        const Real scale = flat(b).norm() + (m * flat(v)).norm();
+        EXPECT_LT(std::abs(residual.dot(flat(d1))) / flat(d1).norm(), 1e-12 * scale);
+        EXPECT_LT(std::abs(residual.dot(flat(d2))) / flat(d2).norm(), 1e-12 * scale);
+        EXPECT_LT((flat(mx) - m * flat(x)).norm(), 1e-12 * scale);
+        const Real e = 0.5 * flat(x).dot(m * flat(x)) - flat(b).dot(flat(x));
+        for (const auto& [a, c] : {std::pair{0.0, 0.0}, {1.0, 0.0}, {1.5, -0.5}, {2.0, -1.0}})
+            EXPECT_LE(e, energy(a, d2, c) + 1e-12 * std::abs(e));
+    }
+}
+
 TEST(ViscosityWeiler2018, DifferingViscositiesSolveToTheStiffTolerance) {
     // Two runny fluids side by side landing on a floor: no particle is stiff, so a single fluid's solves stop at
     // `tolerance` (1e-2), but where viscosities differ the correction is concentrated on the more viscous particles and

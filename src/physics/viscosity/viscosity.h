@@ -130,6 +130,14 @@ struct ConjugateGradient {
                         std::vector<Vec3>& x, Real tolerance, std::size_t maxIterations);
 };
 
+/// The initial guess x = v + a d1 + c d2 with the least energy x.Mx / 2 - b.x over a and c (M symmetric positive
+/// definite), from the products mv = M v, md1 = M d1 and md2 = M d2; writes x and mx = M x. Its set holds v itself and
+/// every fixed extrapolation from d1 and d2, so in M's norm it lies no further from the solution than any of them.
+/// Where d2 is (nearly) parallel to d1, or zero, c is 0.
+void leastEnergyGuess(const std::vector<Vec3>& b, const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
+                      const std::vector<Vec3>& d1, const std::vector<Vec3>& md1, const std::vector<Vec3>& d2,
+                      const std::vector<Vec3>& md2, std::vector<Vec3>& x, std::vector<Vec3>& mx);
+
 /// A viscosity method as an effect. apply() takes back an earlier coupled pass's change, asks the method for the
 /// new velocities, and records the change, the boundary loads and the statistics.
 class ViscosityMethod : public Effect {
@@ -162,6 +170,11 @@ protected:
     /// sum_j k_ij x_ij x_ij^T: the fluid's part of particle i's diagonal block of A (computed with pairs()).
     const Mat3& fluidBlock(std::size_t i) const { return m_fluidBlocks[i]; }
     bool sticky() const { return m_params.boundaryMu > 0; }
+    /// On the first pass of a step with the warm start: the changes of velocity of the last step and of the one
+    /// before it, from which solve()'s initial guess is extrapolated and which a method may combine better; null on
+    /// other passes.
+    const std::vector<Vec3>* lastChange() const { return m_warmPass ? m_dv : nullptr; }
+    const std::vector<Vec3>* earlierChange() const { return m_warmPass ? m_earlierDv : nullptr; }
     /// The boundary's share of particle i's implicit system [Eq. 11-12]: returns sum_k c_ik grad W_ik x_ik^T (the
     /// operator's diagonal block, per unit mass) and adds sum_k c_ik (v_k . x_ik) grad W_ik, the bodies'
     /// velocities, to `bodyTerm`.
@@ -191,6 +204,7 @@ private:
     Real m_lastDt = 0, m_earlierDt = 0;  // the last two steps: scale the warm start
     std::vector<Vec3>* m_earlierDv;       // the change of the step before the last (kEarlierChange)
     bool m_hasSolved = false;
+    bool m_warmPass = false;  // this pass is a step's first, with the warm start
     ViscosityPass m_last;
     // Over the run:
     std::size_t m_solves = 0, m_iterations = 0, m_capHits = 0;

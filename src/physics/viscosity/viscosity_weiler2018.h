@@ -37,7 +37,8 @@ private:
     std::vector<Mat3> m_boundaryBlock;  // -dt times the boundary part of each diagonal block, with boundary_mu > 0
     std::vector<std::uint32_t> m_nearBoundary;  // the particles with a boundary part
     std::vector<Vec3> m_start, m_guess;         // M v and M out before CG
-    sweeps::Rows m_positionRows, m_inputRows, m_inputRows2;  // the sweeps' rows: positions, one or two inputs
+    std::vector<Vec3> m_lastProduct, m_earlierProduct;  // M lastChange() and M earlierChange() for the warm start
+    sweeps::Rows m_positionRows, m_inputRows, m_inputRows2, m_inputRows3;  // the sweeps' rows: positions, inputs
     RigidModes m_rigid;
     ClusterModes m_clusters;
     std::vector<std::uint8_t> m_group;  // each particle's group of clusters (see solve())
