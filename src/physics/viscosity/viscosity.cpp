@@ -294,7 +294,8 @@ void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
     // time (the viscous change grows with dt; unscaled, the default scene took 29 % more CG iterations) and half
     // way extrapolated from the change of the step before (a full extrapolation overshoots where the fluid
     // melts: default scene +19 %; half way saves 4-13 % of the iterations on the default scene and the anchors).
-    // weiler2018 then replaces the fixed extrapolation by the best combination of the two changes (lastChange()).
+    // weiler2018 replaces the fixed extrapolation, in solves at its loose tolerance, by the best combination of the
+    // two changes (lastChange()).
     const bool firstPass = !m_hasSolved || ctx.step != m_lastStep;
     m_hasSolved = true;
     m_lastStep = ctx.step;
