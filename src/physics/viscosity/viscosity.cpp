@@ -285,6 +285,7 @@ void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
     if (n == 0) return;
     auto& v = particles.v();
     auto& dv = *m_dv;
+    auto& earlier = *m_earlierDv;
     // Temperatures change every step, and emitters may have added particles since the last pass.
     m_mu.refresh(particles);
     // With coupled passes the solve runs several times a step, each on the velocity the latest pressure solve
@@ -305,7 +306,6 @@ void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
     if (!m_warmPass) {
         forEachParticle(n, [&](std::size_t i) { m_out[i] = firstPass ? v[i] : Vec3(v[i] + dv[i]); });
     } else {
-        const auto& earlier = *m_earlierDv;
         const Real scale = m_lastDt > 0 ? ctx.dt / m_lastDt : 1;
         // Rates dv / dt of the last two steps, r1 and r0: the guess is dt (r1 + (r1 - r0) / 2).
         const Real ratio = m_earlierDt > 0 ? m_lastDt / m_earlierDt : 0;
@@ -322,7 +322,6 @@ void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
         throw std::runtime_error(fmt::format("step {}: the viscosity solve produced a non-finite residual; lower "
                                              "simulation.time_step.max",
                                              ctx.step));
-    auto& earlier = *m_earlierDv;
     forEachParticle(n, [&](std::size_t i) {
         if (m_warmPass) earlier[i] = dv[i];
         dv[i] = m_out[i] - v[i];

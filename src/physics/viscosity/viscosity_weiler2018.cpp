@@ -153,45 +153,37 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     const auto system = [&](const std::vector<Vec3>& in, std::vector<Vec3>& result) {
         return multiply(ctx, particles, in, result);
     };
-    // The correction the solve has to make, b - M v, and the warm start's residual b - M out, from one sweep.
+    // The correction the solve has to make, b - M v, and the warm start's residual b - M out, from one sweep. A loose
+    // solve's warm start is, of the guesses v + a dv_last + c dv_earlier, the one nearest the solution in M's norm,
+    // from the products of v and of both changes in that sweep (otherwise of v and apply()'s guess). The
+    // fixed extrapolation that apply() guessed lags where the viscous change keeps growing, and a loose solve keeps
+    // part of its start: at 1e-2 the buckling anchor's sheet stood 9.8 % too high at 1 s, 1.1 % with this guess, in
+    // fewer CG iterations. Solves to the stiff tolerance keep little of their start, and there the fixed extrapolation
+    // took fewer iterations (the impacts of Table 2's rows: 18-27 CG iterations a solve against 22-30 with this guess).
+    const std::vector<Vec3>* last = tight ? nullptr : lastChange();
+    const std::vector<Vec3>* earlier = earlierChange();
     m_start.resize(n);
     m_guess.resize(n);
     for (auto* rows : {&m_positionRows, &m_inputRows, &m_inputRows2}) rows->resize(n);
-    const std::vector<Vec3>* last = tight ? nullptr : lastChange();
-    const std::vector<Vec3>* earlier = earlierChange();
+    if (last) m_inputRows3.resize(n), m_lastProduct.resize(n), m_earlierProduct.resize(n);
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        sweeps::toRows(begin, end, x.data(), m_positionRows.data());
+        sweeps::toRows(begin, end, v.data(), m_inputRows.data());
+        sweeps::toRows(begin, end, last ? last->data() : out.data(), m_inputRows2.data());
+        if (last) sweeps::toRows(begin, end, earlier->data(), m_inputRows3.data());
+    });
     const sweeps::Pairs fluidPairs{&ctx.fluidNeighbours, pairs().data()};
     const Mat3* boundary = sticky() ? m_boundaryBlock.data() : nullptr;
-    if (last) {
-        // The warm start of a loose solve: of the guesses v + a dv_last + c dv_earlier, the one nearest the solution
-        // in M's norm, from the products of v and of both changes in one sweep. The fixed extrapolation that apply()
-        // guessed lags where the viscous change keeps growing, and a loose solve keeps part of its start: at 1e-2
-        // the buckling anchor's sheet stood 9.8 % too high at 1 s, 1.1 % with this guess, in fewer CG iterations.
-        // Solves to the stiff tolerance keep little of their start, and there the fixed extrapolation took fewer
-        // iterations (the impacts of Table 2's rows: 18-27 CG iterations a solve against 22-30 with this guess).
-        m_inputRows3.resize(n), m_lastProduct.resize(n), m_earlierProduct.resize(n);
-        forEachBlock(n, [&](std::size_t begin, std::size_t end) {
-            sweeps::toRows(begin, end, x.data(), m_positionRows.data());
-            sweeps::toRows(begin, end, v.data(), m_inputRows.data());
-            sweeps::toRows(begin, end, last->data(), m_inputRows2.data());
-            sweeps::toRows(begin, end, earlier->data(), m_inputRows3.data());
-        });
-        forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        if (last)
             sweeps::viscousProducts(begin, end, fluidPairs, boundary, m_positionRows.data(), m_inputRows.data(),
                                     m_inputRows2.data(), m_inputRows3.data(), dt, m_start.data(),
                                     m_lastProduct.data(), m_earlierProduct.data());
-        });
-        leastEnergyGuess(m_b, v, m_start, *last, m_lastProduct, *earlier, m_earlierProduct, out, m_guess);
-    } else {
-        forEachBlock(n, [&](std::size_t begin, std::size_t end) {
-            sweeps::toRows(begin, end, x.data(), m_positionRows.data());
-            sweeps::toRows(begin, end, v.data(), m_inputRows.data());
-            sweeps::toRows(begin, end, out.data(), m_inputRows2.data());
-        });
-        forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        else
             sweeps::viscousProducts(begin, end, fluidPairs, boundary, m_positionRows.data(), m_inputRows.data(),
                                     m_inputRows2.data(), dt, m_start.data(), m_guess.data());
-        });
-    }
+    });
+    if (last) leastEnergyGuess(m_b, v, m_start, *last, m_lastProduct, *earlier, m_earlierProduct, out, m_guess);
     ViscosityPass pass = m_cg.solve(system, precondition, m_b, v, m_start, m_guess, out, tolerance,
                                     std::size_t(m_params.maxIterations));
     if (m_cg.scale == 0) return pass;  // v_df already solves the system
