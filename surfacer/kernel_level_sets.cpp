@@ -75,38 +75,14 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     const std::vector<Real>& sy = grid.sortedCoords(1);
     const std::vector<Real>& sz = grid.sortedCoords(2);
     std::vector<Ellipsoid> out(x.size());
-    struct Candidates {
-        std::vector<Real> x, y, z;
-        std::vector<std::uint32_t> at;  // position in the grid's sorted order
-    };
-    tbb::enumerable_thread_specific<Candidates> scratch;
+    tbb::enumerable_thread_specific<CellCandidates> scratch;
     forEachBlock(grid.cellCount(), [&](std::size_t begin, std::size_t end) {
-        Candidates& cand = scratch.local();
+        CellCandidates& cand = scratch.local();
         for (std::size_t c = begin; c != end; ++c) {
-            const auto& k = grid.cellCoords(c);
-            std::size_t from[27], to[27], count = 0;
-            int cells = 0;
-            for (int a = -1; a <= 1; ++a)
-                for (int b = -1; b <= 1; ++b)
-                    for (int d = -1; d <= 1; ++d) {
-                        const std::int64_t found = grid.findCell(k[0] + a, k[1] + b, k[2] + d);
-                        if (found < 0) continue;
-                        from[cells] = grid.cellBegin(std::size_t(found));
-                        to[cells] = grid.cellBegin(std::size_t(found) + 1);
-                        count += to[cells] - from[cells];
-                        ++cells;
-                    }
-            const std::size_t room = (count + 63) / 64 * 64;
-            if (cand.at.size() < room)
-                cand.x.resize(room), cand.y.resize(room), cand.z.resize(room), cand.at.resize(room);
-            std::size_t put = 0;
-            for (int n = 0; n != cells; ++n)
-                for (std::size_t t = from[n]; t != to[n]; ++t, ++put)
-                    cand.x[put] = sx[t], cand.y[put] = sy[t], cand.z[put] = sz[t], cand.at[put] = std::uint32_t(t);
-            for (; put != room; ++put)  // too far for any test
-                cand.x[put] = cand.y[put] = cand.z[put] = std::numeric_limits<Real>::max();
-            const std::size_t words = (count + 63) / 64;
+            cand.gather(grid, grid.cellCoords(c));
+            const std::size_t words = cand.words();
             for (std::size_t s = grid.cellBegin(c); s != grid.cellBegin(c + 1); ++s) {
+                const std::uint32_t i = grid.sortedIndices()[s];
                 // Weighted sums over the neighbourhood, itself included, w = 1 - (d / support)^3, of the offsets
                 // from the particle and of their products (the covariance about the weighted mean follows).
                 Real total = 1, m[3] = {0, 0, 0}, q[6] = {0, 0, 0, 0, 0, 0};
@@ -119,7 +95,7 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                         const std::size_t n = base + std::size_t(__builtin_ctzll(bits));
                         const Real dx = cand.x[n] - sx[s], dy = cand.y[n] - sy[s], dz = cand.z[n] - sz[s];
                         const Real d2 = dx * dx + dy * dy + dz * dz;
-                        if (d2 >= support2 || cand.at[n] == s) continue;
+                        if (d2 >= support2 || cand.index[n] == i) continue;
                         const Real weight = 1 - d2 * std::sqrt(d2) * inverseCube;
                         ++neighbours;
                         total += weight;
@@ -128,7 +104,6 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                         q[3] += weight * dx * dy, q[4] += weight * dx * dz, q[5] += weight * dy * dz;
                     }
                 }
-                const std::uint32_t i = grid.sortedIndices()[s];
                 Ellipsoid& e = out[i];
                 e.centre = x[i];
                 Mat3 shape = Mat3::Identity();

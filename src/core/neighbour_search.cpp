@@ -64,6 +64,32 @@ std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Rea
     return bits;
 }
 
+void CellCandidates::gather(const UniformGrid& grid, const std::array<std::int32_t, 3>& cell) {
+    std::size_t from[27], to[27];
+    int cells = 0;
+    count = 0;
+    for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+                const std::int64_t found = grid.findCell(cell[0] + dx, cell[1] + dy, cell[2] + dz);
+                if (found < 0) continue;
+                from[cells] = grid.cellBegin(std::size_t(found));
+                to[cells] = grid.cellBegin(std::size_t(found) + 1);
+                count += to[cells] - from[cells];
+                ++cells;
+            }
+    const std::size_t room = 64 * words();
+    if (index.size() < room) x.resize(room), y.resize(room), z.resize(room), index.resize(room);
+    const Real *gx = grid.sortedCoords(0).data(), *gy = grid.sortedCoords(1).data(), *gz = grid.sortedCoords(2).data();
+    const std::uint32_t* sorted = grid.sortedIndices().data();
+    // Cells hold a handful of points: plain loops beat memcpy calls here.
+    std::size_t k = 0;
+    for (int c = 0; c != cells; ++c)
+        for (std::size_t s = from[c]; s != to[c]; ++s, ++k)
+            x[k] = gx[s], y[k] = gy[s], z[k] = gz[s], index[k] = sorted[s];
+    for (; k != room; ++k) x[k] = y[k] = z[k] = std::numeric_limits<Real>::max();
+}
+
 void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
                std::vector<std::pair<std::uint64_t, std::uint32_t>>& scratch) {
     // Least significant byte first, each pass stable, so that equal keys keep the order they came in; a byte in which
@@ -208,15 +234,8 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     const std::size_t n = queryX.size();
     const Real r2 = radius * radius;
     const auto& qSorted = queryGrid.sortedIndices();
-    const auto& tSorted = targetGrid.sortedIndices();
 
-    // The candidates of one query cell (the points of its 27 neighbour cells), coordinates apart so that the
-    // distance test vectorises. Sized up only (size() is capacity, not count).
-    struct Candidates {
-        std::vector<Real> x, y, z;
-        std::vector<std::uint32_t> j;
-    };
-    tbb::enumerable_thread_specific<Candidates> scratch;
+    tbb::enumerable_thread_specific<CellCandidates> scratch;
 
     // One pass: chunks of query cells write their particles' lists into their own buffers (fixed chunk
     // boundaries, so the result is the same for any thread count); a second, cheap pass copies each list
@@ -230,46 +249,16 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     auto& chunkOf = out.scratch.chunkOf;
     auto& localStart = out.scratch.localStart;
     count.resize(n), chunkOf.resize(n), localStart.resize(n);
-    const Real* tx = targetGrid.sortedCoords(0).data();
-    const Real* ty = targetGrid.sortedCoords(1).data();
-    const Real* tz = targetGrid.sortedCoords(2).data();
-
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const auto& range) {
-        Candidates& cand = scratch.local();
+        CellCandidates& cand = scratch.local();
         for (std::size_t chunk = range.begin(); chunk != range.end(); ++chunk) {
             auto& buffer = buffers[chunk];  // never shrunk: its size is room, the lists fill it from the start
             std::size_t used = 0;
             const std::size_t lastCell = std::min(cells, (chunk + 1) * kCellsPerChunk);
             for (std::size_t c = chunk * kCellsPerChunk; c < lastCell; ++c) {
-                const auto& cc = queryGrid.cellCoords(c);
-                std::size_t from[27], to[27], m = 0;
-                int ranges = 0;
-                for (int dz = -1; dz <= 1; ++dz)
-                    for (int dy = -1; dy <= 1; ++dy)
-                        for (int dx = -1; dx <= 1; ++dx) {
-                            const std::int64_t t = targetGrid.findCell(cc[0] + dx, cc[1] + dy, cc[2] + dz);
-                            if (t < 0) continue;
-                            from[ranges] = targetGrid.cellBegin(t);
-                            to[ranges] = targetGrid.cellBegin(t + 1);
-                            m += to[ranges] - from[ranges];
-                            ++ranges;
-                        }
-                const std::size_t words = (m + 63) / 64;
-                if (cand.j.size() < 64 * words)
-                    cand.x.resize(64 * words), cand.y.resize(64 * words), cand.z.resize(64 * words),
-                        cand.j.resize(64 * words);
-                // Cells hold a handful of points: plain loops beat memcpy calls here.
-                for (std::size_t r = 0, k = 0; r < std::size_t(ranges); ++r)
-                    for (std::size_t s = from[r]; s < to[r]; ++s, ++k) {
-                        cand.x[k] = tx[s];
-                        cand.y[k] = ty[s];
-                        cand.z[k] = tz[s];
-                        cand.j[k] = tSorted[s];
-                    }
-                // The last word's unused candidates lie too far for any test.
-                for (std::size_t k = m; k < 64 * words; ++k)
-                    cand.x[k] = cand.y[k] = cand.z[k] = std::numeric_limits<Real>::max();
-                const std::uint32_t* cj = cand.j.data();
+                cand.gather(targetGrid, queryGrid.cellCoords(c));
+                const std::size_t m = cand.count, words = cand.words();
+                const std::uint32_t* cj = cand.index.data();
                 for (std::size_t s = queryGrid.cellBegin(c); s < queryGrid.cellBegin(c + 1); ++s) {
                     const std::uint32_t i = qSorted[s];
                     const Real xi = queryX[i].x(), yi = queryX[i].y(), zi = queryX[i].z();

@@ -106,6 +106,19 @@ void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
 /// arrays hold 64 values (past the last candidate, values too far for any test).
 std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Real yi, Real zi, Real r2);
 
+/// The points of the 27 cells of a grid around one cell (given by its coordinates, so it may be a cell of another
+/// grid with the same cell size), coordinates apart so that closer64 tests them 64 at a time; past `count`, up to
+/// a multiple of 64, values too far for any test. Kept between gathers: it only grows.
+struct CellCandidates {
+    std::vector<Real> x, y, z;
+    std::vector<std::uint32_t> index;  // each point's index in the set the grid was built from
+    std::size_t count = 0;
+
+    void gather(const UniformGrid& grid, const std::array<std::int32_t, 3>& cell);
+    /// Words of 64 candidates to test.
+    std::size_t words() const { return (count + 63) / 64; }
+};
+
 /// Finds, for every query point i, the target points j with |x_i - x_j| < radius. With sameSet the query
 /// and target are one set and i is not its own neighbour. Both grids must have cell size >= radius and be
 /// built from queryX and targetX respectively.
