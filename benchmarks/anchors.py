@@ -144,12 +144,13 @@ def main():
                          f"{1e6 * statistics.median(r['loop'] / r['steps'] for r in rs) * THREADS / n:.2f}",
                          f"{last['p_it']:.1f}", f"{last['v_it']:.1f}",
                          f"{100 * shape['compression_mean']:.3f} / {100 * shape['compression_p999']:.2f} / "
-                         f"{100 * shape['compression_max']:.2f}",
+                         f"{100 * shape['compression_max']:.2f}", f"{100 * shape['bulk_density_error_median']:+.2f}",
                          f"{100 * abs(shape['spread_m'] / ref['spread_m'] - 1):.2f}",
                          f"{100 * abs(shape['centroid'][1] / ref['centroid'][1] - 1):.2f}"])
     header = ["scene", "program", "fluid particles", "s per simulated s", "vs SPlisHSPlasH", "ms per step", "steps",
               "core-us per particle-step", "pressure it/step", "viscosity CG it/step",
-              "compression mean / 99.9th percentile / max [%]", "spread error [%]", "centroid height error [%]"]
+              "compression mean / 99.9th percentile / max [%]", "bulk density error [%]", "spread error [%]",
+              "centroid height error [%]"]
     print(f"\n{THREADS} thread(s), median of {REPS} runs; errors against ganache at tight tolerances and 0.5 ms steps\n")
     print("| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
