@@ -134,8 +134,9 @@ TEST(Cli, NoParticleOfALandingBlockStaysFarMoreCompressedThanTheTolerance) {
     // it; MPRGP must still give pressure to a particle that its neighbours squeeze while it holds none. With the
     // proportioning threshold at 1 throughout (PressureDFSPH::solveMprgp) this block, the 8k anchor of
     // ../shared/anchors, ended its landing with one particle near a bottom edge 0.55 % compressed while the 99.9th
-    // percentile was 0.06 %; at 0.1 near the tolerance the largest is 0.08 %. The bound, 0.2 %, is twenty times the tolerance. Compression is taken over the fluid
-    // alone (the particle was 5 mm clear of the floor), with the lattice mass that makes rest density 1000 kg/m^3.
+    // percentile was 0.06 %; at 0.1 near the tolerance the largest is 0.08 %. The bound, 0.2 %, is twenty times the
+    // tolerance. Compression is taken over the fluid alone (the particle was 5 mm clear of the floor), with the lattice
+    // mass that makes rest density 1000 kg/m^3.
     const fs::path out = freshDir("landing");
     const fs::path scene = out / "block8k.yaml";
     std::ofstream(scene) << R"(ganache: 1
