@@ -103,7 +103,9 @@ int main(int argc, char** argv) {
         NeighbourList near;
         UniformGrid wallGrid(h);
         if (floor) {
-            wall = planePoints(Vec3(0, floorY, 0), Vec3::UnitY(), lo, hi, radius, h);
+            // Sampled 2h past the fluid on every side, so that every wall particle within reach of the fluid has its
+            // whole neighbourhood for its volume (at the sheet's edge, short of it, the wall weighed more).
+            wall = planePoints(Vec3(0, floorY, 0), Vec3::UnitY(), lo.array() - 2 * h, hi.array() + 2 * h, radius, h);
             volume = boundaryVolumes(wall, w);
             wallGrid.build(wall);
             findNeighbours(grid, x, wallGrid, wall, h, false, near);
