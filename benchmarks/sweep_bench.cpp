@@ -25,7 +25,7 @@ struct Block {
     std::vector<Vec3> x, v;
     sweeps::Rows xRows, vRows;  // as the sweeps read them
     NeighbourList pairs;
-    std::vector<Real> weight;  // one per pair
+    sweeps::PairWeights weight;  // one per pair
 };
 
 // A jittered lattice block of about n particles in Z order, its neighbour lists and a weight per pair.
@@ -45,7 +45,8 @@ Block block(std::size_t n) {
     b.x.swap(sorted);
     findFluidNeighbours(grid, b.x, supportRadiusFor(kRadius), b.pairs);
     for (std::size_t i = 0; i < b.x.size(); ++i) b.v.emplace_back(unit(rng), unit(rng), unit(rng));
-    for (std::size_t p = 0; p < b.pairs.pairs(); ++p) b.weight.push_back(-1e3 * (1 + 0.1 * unit(rng)));
+    for (std::size_t p = 0; p < b.pairs.pairs(); ++p)
+        b.weight.push_back(sweeps::PairWeight(-1e3 * (1 + 0.1 * unit(rng))));
     b.xRows.resize(b.x.size());
     b.vRows.resize(b.x.size());
     sweeps::toRows(0, b.x.size(), b.x.data(), b.xRows.data());
@@ -67,7 +68,8 @@ void setCounters(benchmark::State& state, const Block& b, double bytesPerIterati
 // Bytes a product moves at least once: the lists (offsets, indices), the pair weights, the input and output vectors
 // and the positions; neighbours' values are assumed to come from cache (the particles are in Z order).
 double productBytes(const Block& b, double perParticleIn, double perParticleOut) {
-    return double(b.x.size()) * (8 + 24 + perParticleIn + perParticleOut) + double(b.pairs.pairs()) * (4 + 8);
+    return double(b.x.size()) * (8 + 24 + perParticleIn + perParticleOut) +
+           double(b.pairs.pairs()) * double(4 + sizeof(sweeps::PairWeight));
 }
 
 void viscous(benchmark::State& state) {

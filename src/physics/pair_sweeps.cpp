@@ -24,10 +24,10 @@ inline Lanes zero() { return {_mm256_setzero_pd()}; }
 inline Lanes broadcast(Real a) { return {_mm256_set1_pd(a)}; }
 inline Lanes load(const Row& r) { return {_mm256_load_pd(r.data())}; }
 // w[0, count), zero beyond: a tail never reads past its particle's pairs.
-inline Lanes loadWeights(const Real* w, int count) {
-    if (count == 4) return {_mm256_loadu_pd(w)};
-    const __m256i mask = _mm256_cmpgt_epi64(_mm256_set1_epi64x(count), _mm256_setr_epi64x(0, 1, 2, 3));
-    return {_mm256_maskload_pd(w, mask)};
+inline Lanes loadWeights(const PairWeight* w, int count) {
+    if (count == 4) return {_mm256_cvtps_pd(_mm_loadu_ps(w))};
+    const __m128i mask = _mm_cmpgt_epi32(_mm_set1_epi32(count), _mm_setr_epi32(0, 1, 2, 3));
+    return {_mm256_cvtps_pd(_mm_maskload_ps(w, mask))};
 }
 // Lane l of c[k] is entry k of row r[l].
 inline void transpose(const Row* const (&r)[4], Lanes (&c)[4]) {
@@ -59,9 +59,9 @@ inline Lanes operator*(Lanes a, Lanes b) { return lanewise(a, b, [](Real x, Real
 inline Lanes zero() { return {{0, 0, 0, 0}}; }
 inline Lanes broadcast(Real a) { return {{a, a, a, a}}; }
 inline Lanes load(const Row& r) { return {{r[0], r[1], r[2], r[3]}}; }
-inline Lanes loadWeights(const Real* w, int count) {
+inline Lanes loadWeights(const PairWeight* w, int count) {
     Lanes out = zero();
-    for (int l = 0; l < count; ++l) out.v[l] = w[l];
+    for (int l = 0; l < count; ++l) out.v[l] = Real(w[l]);
     return out;
 }
 inline void transpose(const Row* const (&r)[4], Lanes (&c)[4]) {
@@ -167,7 +167,7 @@ void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* bo
         Lanes a = zero();  // the fourth lane stays zero: the rows' fourth values are
         for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
             const std::uint32_t j = idx[p];
-            a = a + broadcast(fluid.weight[p]) * ((ui - load(u[j])) * (xi - load(x[j])));
+            a = a + broadcast(Real(fluid.weight[p])) * ((ui - load(u[j])) * (xi - load(x[j])));
         }
         const Row l = row(a);
         Real r = (l[0] + l[1]) + l[2];
@@ -187,7 +187,7 @@ void pressureChange(std::size_t begin, std::size_t end, Pairs fluid, const Vec3*
         Lanes a = zero();
         for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
             const std::uint32_t j = idx[p];
-            a = a + (broadcast(fluid.weight[p]) * (si + broadcast(s[j]))) * (xi - load(x[j]));
+            a = a + (broadcast(Real(fluid.weight[p])) * (si + broadcast(s[j]))) * (xi - load(x[j]));
         }
         const Row l = row(a);
         Vec3 total(l[0], l[1], l[2]);

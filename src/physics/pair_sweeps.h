@@ -22,13 +22,18 @@ namespace ganache::sweeps {
 using Row = Eigen::Matrix<Real, 4, 1>;
 using Rows = std::vector<Row>;
 
+/// A pair's weight, stored in single precision: the sweeps stream a weight and an index a pair from memory at every
+/// solver iteration, and the weights' last digits are far below any solver tolerance. The sweeps compute in double.
+using PairWeight = float;
+using PairWeights = std::vector<PairWeight>;
+
 /// rows[i] = (v_i, 0) for i in [begin, end).
 void toRows(std::size_t begin, std::size_t end, const Vec3* v, Row* rows);
 
 /// One neighbour list with a weight per pair (nullptr: the list takes no part).
 struct Pairs {
     const NeighbourList* list = nullptr;
-    const Real* weight = nullptr;
+    const PairWeight* weight = nullptr;
 };
 
 /// For i in [begin, end): out_i = in_i - dt sum_p k_p (x_ij . (in_i - in_j)) x_ij + B_i in_i, the product

@@ -16,7 +16,7 @@ namespace {
 struct PairSystem {
     std::vector<Vec3> x;
     NeighbourList fluid;
-    std::vector<Real> k;
+    sweeps::PairWeights k;
     Real dt = 0.01;
 
     explicit PairSystem(int side) {
@@ -30,7 +30,7 @@ struct PairSystem {
         k.resize(fluid.pairs());
         for (std::size_t i = 0; i < x.size(); ++i)
             for (std::size_t p = fluid.first(i); p < fluid.last(i); ++p)
-                k[p] = -1e3 / (1 + (x[i] - x[fluid.indices[p]]).squaredNorm());  // symmetric in i and j
+                k[p] = sweeps::PairWeight(-1e3 / (1 + (x[i] - x[fluid.indices[p]]).squaredNorm()));  // symmetric
     }
     std::vector<Vec3> multiply(const std::vector<Vec3>& v) const {
         std::vector<Vec3> out(v.size());

@@ -12,7 +12,8 @@ namespace {
 
 struct Field {
     std::vector<Vec3> x, u;
-    std::vector<Real> s, weight;
+    std::vector<Real> s;
+    sweeps::PairWeights weight;
     std::vector<Mat3> block;
     std::vector<Vec3> boundarySum;
     std::vector<Real> bodyRate;
@@ -38,7 +39,7 @@ Field field(std::size_t n) {
     for (std::size_t i = 0; i < n; ++i) {  // offsets start with the 0 NeighbourList holds
         for (std::size_t c = 0; c < i % 9; ++c) {
             f.list.indices.push_back(std::uint32_t(c == 0 ? n - 1 : (i + 7 * c + 1) % n));
-            f.weight.push_back(unit(rng));
+            f.weight.push_back(sweeps::PairWeight(unit(rng)));
         }
         f.list.offsets.push_back(f.list.indices.size());
     }

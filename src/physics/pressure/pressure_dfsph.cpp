@@ -89,8 +89,8 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
         Vec3 sum = Vec3::Zero();
         Real squares = 0;
         for (std::size_t p = f.first(i); p < f.last(i); ++p) {
-            m_weights[p] = m[f.indices[p]] * ctx.gradients.fluid[p];
-            const Vec3 g = m_weights[p] * (x[i] - x[f.indices[p]]);
+            m_weights[p] = sweeps::PairWeight(m[f.indices[p]] * ctx.gradients.fluid[p]);
+            const Vec3 g = Real(m_weights[p]) * (x[i] - x[f.indices[p]]);
             sum += g;
             squares += g.squaredNorm();
         }

@@ -62,7 +62,8 @@ private:
     PressureSettings m_settings;
     std::vector<Real> m_factor;     // 1 / A_ii, 0 where it vanishes (lone particles)
     // Per pair of the step: m_j g_ij for fluid pairs, kWall rho_0i V_k g_ik for boundary pairs (grad W = g x).
-    std::vector<Real> m_weights, m_boundaryWeights;
+    sweeps::PairWeights m_weights;
+    std::vector<Real> m_boundaryWeights;
     // Per particle of the step, the boundary summed once (it stands still during a solve): sum_k w_ik x_ik, and the
     // bodies' velocities' share of the density rate, sum_k w_ik v_k . x_ik.
     std::vector<Vec3> m_boundarySum;

@@ -197,7 +197,7 @@ void BlockLdlt::solve(Eigen::Matrix<Real, Eigen::Dynamic, 1>& b) const {
 
 void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint8_t>* group, Real cellSize,
                          std::size_t maxClusters, const NeighbourList& fluid,
-                         const std::vector<Real>& pairs, Real dt, const std::vector<Mat3>* extra,
+                         const sweeps::PairWeights& pairs, Real dt, const std::vector<Mat3>* extra,
                          const std::vector<std::uint32_t>& withExtra) {
     const std::size_t n = x.size();
     // The clusters: particles sorted by cell and group, then by index, so the order is the same for any thread count.

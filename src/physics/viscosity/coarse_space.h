@@ -5,6 +5,7 @@
 // whole fluid (RigidModes) or on each cluster of nearby particles (ClusterModes), removes those modes from CG.
 
 #include "core/neighbour_search.h"
+#include "physics/pair_sweeps.h"
 
 #include <cstdint>
 #include <vector>
@@ -71,7 +72,7 @@ public:
     /// and the boundary part of each particle's diagonal block (null: none; withExtra: the particles where it is not
     /// zero).
     void build(const std::vector<Vec3>& x, const std::vector<std::uint8_t>* group, Real cellSize,
-               std::size_t maxClusters, const NeighbourList& fluid, const std::vector<Real>& pairs, Real dt,
+               std::size_t maxClusters, const NeighbourList& fluid, const sweeps::PairWeights& pairs, Real dt,
                const std::vector<Mat3>* extra, const std::vector<std::uint32_t>& withExtra);
     /// z += Z E^-1 Z^T r: the exact answer within the clusters' rigid motions.
     void addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const;

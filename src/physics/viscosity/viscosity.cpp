@@ -207,7 +207,9 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
         // k_ij x_ij x_ij^T (six distinct entries). The block's g_ij shape / (|x_ij|^2 + 0.01 h^2) first, in one pass
         // that vectorises (its division was a quarter of this function's time when taken pair by pair).
         const std::size_t p0 = f.first(begin), count = f.first(end) - p0;
-        Real* k = m_pairs.data() + p0;
+        thread_local std::vector<Real> shaped;
+        shaped.resize(count);
+        Real* k = shaped.data();
         for (std::size_t i = begin; i < end; ++i)
             for (std::size_t p = f.first(i); p < f.last(i); ++p) k[p - p0] = (x[i] - x[f.indices[p]]).squaredNorm();
         for (std::size_t q = 0; q < count; ++q) k[q] = g[p0 + q] * m_weights.shape(k[q]) / (k[q] + eps);
@@ -218,8 +220,10 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
                 const std::uint32_t j = f.indices[p];
                 const Vec3 xij = x[i] - x[j];
                 const Real muj = varies ? m_mu(j) : mui;
-                const Real kp = 0.25 * scale * (mui + muj) * (mi + m[j]) * k[p - p0] * (ri * m_inverseDensity[j]);
-                k[p - p0] = kp;
+                const sweeps::PairWeight stored(0.25 * scale * (mui + muj) * (mi + m[j]) * k[p - p0] *
+                                                (ri * m_inverseDensity[j]));
+                m_pairs[p] = stored;
+                const Real kp = stored;
                 b00 += kp * xij.x() * xij.x(), b01 += kp * xij.x() * xij.y(), b02 += kp * xij.x() * xij.z();
                 b11 += kp * xij.y() * xij.y(), b12 += kp * xij.y() * xij.z(), b22 += kp * xij.z() * xij.z();
             }
@@ -247,7 +251,7 @@ Vec3 ViscosityMethod::laplacian(const StepContext& ctx, const ParticleSet& parti
     for (std::size_t p = f.first(i); p < f.last(i); ++p) {
         const std::uint32_t j = f.indices[p];
         const Vec3 xij = x[i] - x[j];
-        a += (m_pairs[p] * xij.dot(in[i] - in[j])) * xij;
+        a += (Real(m_pairs[p]) * xij.dot(in[i] - in[j])) * xij;
     }
     if (sticky()) {
         const auto& b = ctx.boundaryNeighbours;

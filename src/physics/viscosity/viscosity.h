@@ -8,6 +8,7 @@
 // pass's change, the boundary's reaction goes to the bodies, and iterations and residuals go to the stats.
 
 #include "physics/materials.h"
+#include "physics/pair_sweeps.h"
 #include "physics/simulation.h"
 
 #include <functional>
@@ -165,7 +166,9 @@ protected:
     /// pair, so the operator is symmetric [Eq. 9]; grad W_ij = g_ij x_ij), in the order of the fluid neighbour
     /// lists; with boundary viscosity, k_ik = 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) g_ik [Eq. 11-12].
     /// apply() computes them before solve(), so no product evaluates them again.
-    const std::vector<Real>& pairs() const { return m_pairs; }
+    /// Stored in single precision (sweeps::PairWeight); fluidBlock() is summed from the stored values, so the blocks
+    /// are those of the operator the products apply.
+    const sweeps::PairWeights& pairs() const { return m_pairs; }
     const std::vector<Real>& boundaryPairs() const { return m_boundaryPairs; }
     /// sum_j k_ij x_ij x_ij^T: the fluid's part of particle i's diagonal block of A (computed with pairs()).
     const Mat3& fluidBlock(std::size_t i) const { return m_fluidBlocks[i]; }
@@ -196,7 +199,8 @@ private:
     LaplacianWeights m_weights;
     std::vector<Vec3>* m_dv;  // the last pass's change, a particle attribute (kChange in viscosity.cpp)
     std::vector<Vec3> m_out;
-    std::vector<Real> m_pairs, m_boundaryPairs;  // see pairs()
+    sweeps::PairWeights m_pairs;  // see pairs()
+    std::vector<Real> m_boundaryPairs;
     std::vector<Mat3> m_fluidBlocks;
     std::vector<Real> m_inverseDensity;  // 1 / rho_i of the step
     BodyLoads m_passLoads;    // the viscous loads of the latest pass, which a later pass of the step replaces
