@@ -112,8 +112,7 @@ int main(int argc, char** argv) {
         }
         Real meanCompression = 0, maxCompression = 0;
         std::size_t worst = 0;
-        std::vector<Real> compression(n);
-        std::vector<std::pair<std::size_t, Real>> bulk(n);  // (neighbour count, density error)
+        std::vector<std::pair<std::size_t, Real>> error(n);  // (neighbour count, rho / rho_0 - 1)
         for (std::size_t i = 0; i < n; ++i) {
             Real rho = mass * w.W0();
             for (std::uint32_t j : fluid.of(i)) rho += mass * w.W(x[i] - x[j]);
@@ -122,15 +121,18 @@ int main(int argc, char** argv) {
             const Real c = std::max<Real>(0, rho / rho0 - 1);
             meanCompression += c / Real(n);
             if (c > maxCompression) maxCompression = c, worst = i;
-            compression[i] = c;
-            bulk[i] = {fluid.of(i).size(), rho / rho0 - 1};
+            error[i] = {fluid.of(i).size(), rho / rho0 - 1};
         }
-        // The upper half by neighbour count, then its median density error.
-        std::sort(bulk.begin(), bulk.end());
+        // The 99.9th percentile of compression (of the error: compression is its positive part), then the median error
+        // of the upper half by neighbour count.
+        std::vector<Real> sorted(n);
+        for (std::size_t i = 0; i < n; ++i) sorted[i] = error[i].second;
+        std::sort(sorted.begin(), sorted.end());
+        const Real p999 = n ? std::max<Real>(0, sorted[std::size_t(0.999 * Real(n - 1))]) : 0;
+        std::sort(error.begin(), error.end());
         std::vector<Real> inner;
-        for (std::size_t i = n / 2; i < n; ++i) inner.push_back(bulk[i].second);
+        for (std::size_t i = n / 2; i < n; ++i) inner.push_back(error[i].second);
         std::sort(inner.begin(), inner.end());
-        std::sort(compression.begin(), compression.end());
         Real nearest = std::numeric_limits<Real>::infinity();
         for (std::uint32_t j : fluid.of(worst)) nearest = std::min(nearest, (x[worst] - x[j]).norm() / d);
         if (!std::isfinite(nearest)) nearest = 0;  // no neighbour, and JSON has no infinity
@@ -145,7 +147,7 @@ int main(int argc, char** argv) {
                    file, n, centre.x(), centre.y(), centre.z(), std::sqrt(spread),
                    heights.empty() ? 0.0 : heights[std::size_t(0.99 * Real(heights.size() - 1))],
                    heights.empty() ? 0.0 : heights.back(), meanCompression, maxCompression,
-                   n ? compression[std::size_t(0.999 * Real(n - 1))] : 0.0, at, maxCompression > 0 ? nearest : 0.0,
+                   p999, at, maxCompression > 0 ? nearest : 0.0,
                    inner.empty() ? 0.0 : inner[inner.size() / 2]);
     } catch (const std::exception& e) {
         std::cerr << "anchor_metrics: " << e.what() << "\n";
