@@ -20,7 +20,27 @@ struct Lanes {
 inline Lanes operator+(Lanes a, Lanes b) { return {_mm256_add_pd(a.v, b.v)}; }
 inline Lanes operator-(Lanes a, Lanes b) { return {_mm256_sub_pd(a.v, b.v)}; }
 inline Lanes operator*(Lanes a, Lanes b) { return {_mm256_mul_pd(a.v, b.v)}; }
+inline Lanes operator/(Lanes a, Lanes b) { return {_mm256_div_pd(a.v, b.v)}; }
 inline Lanes zero() { return {_mm256_setzero_pd()}; }
+// a[j[0]], ..., a[j[3]]
+inline Lanes gather(const Real* a, const std::size_t (&j)[4]) { return {_mm256_setr_pd(a[j[0]], a[j[1]], a[j[2]], a[j[3]])}; }
+// a[0, count), zero beyond
+inline Lanes loadFirst(const Real* a, int count) {
+    if (count == 4) return {_mm256_loadu_pd(a)};
+    const __m256i mask = _mm256_cmpgt_epi64(_mm256_set1_epi64x(count), _mm256_setr_epi64x(0, 1, 2, 3));
+    return {_mm256_maskload_pd(a, mask)};
+}
+// The lanes rounded to PairWeight, stored to w[0, count), and widened back.
+inline Lanes storeWeights(Lanes a, PairWeight* w, int count) {
+    const __m128 f = _mm256_cvtpd_ps(a.v);
+    if (count == 4) {
+        _mm_storeu_ps(w, f);
+    } else {
+        const __m128i mask = _mm_cmpgt_epi32(_mm_set1_epi32(count), _mm_setr_epi32(0, 1, 2, 3));
+        _mm_maskstore_ps(w, mask, f);
+    }
+    return {_mm256_cvtps_pd(f)};
+}
 inline Lanes broadcast(Real a) { return {_mm256_set1_pd(a)}; }
 inline Lanes load(const Row& r) { return {_mm256_load_pd(r.data())}; }
 // w[0, count), zero beyond: a tail never reads past its particle's pairs.
@@ -56,7 +76,23 @@ inline Lanes lanewise(Lanes a, Lanes b, Op op) {
 inline Lanes operator+(Lanes a, Lanes b) { return lanewise(a, b, [](Real x, Real y) { return x + y; }); }
 inline Lanes operator-(Lanes a, Lanes b) { return lanewise(a, b, [](Real x, Real y) { return x - y; }); }
 inline Lanes operator*(Lanes a, Lanes b) { return lanewise(a, b, [](Real x, Real y) { return x * y; }); }
+inline Lanes operator/(Lanes a, Lanes b) { return lanewise(a, b, [](Real x, Real y) { return x / y; }); }
 inline Lanes zero() { return {{0, 0, 0, 0}}; }
+inline Lanes gather(const Real* a, const std::size_t (&j)[4]) { return {{a[j[0]], a[j[1]], a[j[2]], a[j[3]]}}; }
+inline Lanes loadFirst(const Real* a, int count) {
+    Lanes out = zero();
+    for (int l = 0; l < count; ++l) out.v[l] = a[l];
+    return out;
+}
+inline Lanes storeWeights(Lanes a, PairWeight* w, int count) {
+    Lanes out;
+    for (int l = 0; l < 4; ++l) {
+        const PairWeight f(a.v[l]);
+        if (l < count) w[l] = f;
+        out.v[l] = Real(f);
+    }
+    return out;
+}
 inline Lanes broadcast(Real a) { return {{a, a, a, a}}; }
 inline Lanes load(const Row& r) { return {{r[0], r[1], r[2], r[3]}}; }
 inline Lanes loadWeights(const PairWeight* w, int count) {
@@ -156,6 +192,62 @@ void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3
     viscousProductsOf<3>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
 }
 
+void squaredDistances(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x, Real* d2) {
+    const std::uint32_t* idx = list.indices.data();
+    const std::uint64_t p0 = list.offsets[begin];
+    for (std::size_t i = begin; i < end; ++i) {
+        const Lanes xi[3] = {broadcast(x[i][0]), broadcast(x[i][1]), broadcast(x[i][2])};
+        const std::uint64_t last = list.offsets[i + 1];
+        for (std::uint64_t p = list.offsets[i]; p < last; p += 4) {
+            const int count = int(std::min<std::uint64_t>(4, last - p));
+            const Row* r[4];
+            for (int l = 0; l < 4; ++l) r[l] = x + (l < count ? idx[p + l] : i);
+            Lanes c[4];
+            transpose(r, c);
+            const Lanes a = xi[0] - c[0], b = xi[1] - c[1], d = xi[2] - c[2];
+            const Row s = row((a * a + b * b) + d * d);
+            for (int l = 0; l < count; ++l) d2[p + l - p0] = s[l];
+        }
+    }
+}
+
+void viscousWeights(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x,
+                    const ViscousWeightTerms& t, PairWeight* weights, Mat3* blocks) {
+    const std::uint32_t* idx = list.indices.data();
+    const Lanes c = broadcast(t.c), eps = broadcast(t.eps), one = broadcast(1), inverseSpacing2 =
+        broadcast(t.inverseSpacing2), linear = broadcast(t.linear), quadratic = broadcast(t.quadratic);
+    for (std::size_t i = begin; i < end; ++i) {
+        const Lanes xi[3] = {broadcast(x[i][0]), broadcast(x[i][1]), broadcast(x[i][2])};
+        const Real mui = t.mu ? t.mu[i] : t.muConstant;
+        const Lanes mi = broadcast(t.mass[i]), ri = broadcast(t.inverseDensity[i]), muiLanes = broadcast(mui);
+        Lanes b00 = zero(), b01 = zero(), b02 = zero(), b11 = zero(), b12 = zero(), b22 = zero();
+        const std::uint64_t last = list.offsets[i + 1];
+        for (std::uint64_t p = list.offsets[i]; p < last; p += 4) {
+            // A tail's missing pairs are particle i itself with gradient zero: weight zero.
+            const int count = int(std::min<std::uint64_t>(4, last - p));
+            std::size_t j[4];
+            for (int l = 0; l < 4; ++l) j[l] = l < count ? idx[p + l] : i;
+            const Row* const r[4] = {x + j[0], x + j[1], x + j[2], x + j[3]};
+            Lanes xj[4];
+            transpose(r, xj);
+            const Lanes d0 = xi[0] - xj[0], d1 = xi[1] - xj[1], d2 = xi[2] - xj[2];
+            const Lanes dd = (d0 * d0 + d1 * d1) + d2 * d2;
+            const Lanes u = dd * inverseSpacing2 - one;
+            const Lanes k = loadFirst(t.gradient + p, count) * (one + u * (linear + u * quadratic)) / (dd + eps);
+            const Lanes muj = t.mu ? gather(t.mu, j) : muiLanes;
+            // every factor symmetric in i and j, multiplied in one order: k_ij = k_ji to the last bit
+            const Lanes w = storeWeights(
+                c * (muiLanes + muj) * (mi + gather(t.mass, j)) * k * (ri * gather(t.inverseDensity, j)), weights + p,
+                count);
+            const Lanes w0 = w * d0, w1 = w * d1;
+            b00 = b00 + w0 * d0, b01 = b01 + w0 * d1, b02 = b02 + w0 * d2;
+            b11 = b11 + w1 * d1, b12 = b12 + w1 * d2, b22 = b22 + (w * d2) * d2;
+        }
+        const Real s00 = sum(b00), s01 = sum(b01), s02 = sum(b02), s11 = sum(b11), s12 = sum(b12), s22 = sum(b22);
+        blocks[i] << s00, s01, s02, s01, s11, s12, s02, s12, s22;
+    }
+}
+
 // The pressure sweeps take one pair per vector, its lanes the coordinates, and add the lanes only at the end: their
 // pairs need no sum over coordinates in between (the viscous product's do, hence its groups of four pairs).
 void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* boundarySum, const Real* bodyRate,
@@ -175,6 +267,22 @@ void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* bo
             r += (u[i][0] * boundarySum[i].x() + u[i][1] * boundarySum[i].y()) + u[i][2] * boundarySum[i].z();
         if (bodyRate) r -= bodyRate[i];
         rate[i] = r;
+    }
+}
+
+void gradientSums(std::size_t begin, std::size_t end, Pairs fluid, const Row* x, Row* sums) {
+    const std::uint64_t* off = fluid.list->offsets.data();
+    const std::uint32_t* idx = fluid.list->indices.data();
+    for (std::size_t i = begin; i < end; ++i) {
+        const Lanes xi = load(x[i]);
+        Lanes a = zero(), squares = zero();
+        for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
+            const Lanes g = broadcast(Real(fluid.weight[p])) * (xi - load(x[idx[p]]));
+            a = a + g;
+            squares = squares + g * g;
+        }
+        const Row l = row(a), s = row(squares);
+        sums[i - begin] = Row(l[0], l[1], l[2], (s[0] + s[1]) + s[2]);
     }
 }
 

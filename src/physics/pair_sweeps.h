@@ -50,6 +50,30 @@ void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3
 void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
                      const Row* in1, const Row* in2, const Row* in3, Real dt, Vec3* out1, Vec3* out2, Vec3* out3);
 
+/// For the pairs p of particles [begin, end): d2[p - list.first(begin)] = |x_ij|^2.
+void squaredDistances(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x, Real* d2);
+
+/// What a viscous pair's weight is made of [WKBB18 Eq. 7, 9]: k_ij = c (mu_i + mu_j) (m_i + m_j) g_ij shape /
+/// ((d2 + eps) rho_i rho_j), with d2 = |x_ij|^2, shape = 1 + u (linear + u quadratic) and u = d2 inverseSpacing2 - 1.
+struct ViscousWeightTerms {
+    const Real* gradient = nullptr;        ///< g of each pair of the list, in its order
+    const Real* mass = nullptr;            ///< m_i
+    const Real* inverseDensity = nullptr;  ///< 1 / rho_i
+    const Real* mu = nullptr;              ///< mu_i, or null: muConstant for every particle
+    Real muConstant = 0;
+    Real c = 0, eps = 0, inverseSpacing2 = 0, linear = 0, quadratic = 0;
+};
+
+/// For i in [begin, end): the weights k_p of its pairs, stored in single precision (pair p at weights[p]), and
+/// blocks_i = sum_p k_p x_ij x_ij^T from the stored weights (the fluid's part of particle i's diagonal block of the
+/// viscous operator, as the products apply it), in one pass over the pairs.
+void viscousWeights(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x,
+                    const ViscousWeightTerms& terms, PairWeight* weights, Mat3* blocks);
+
+/// For i in [begin, end): sums[i - begin] = (sum_p g_p, sum_p |g_p|^2) with g_p = w_p x_ij, a pressure pair's
+/// push (the DFSPH factor's sums), its first three entries the vector.
+void gradientSums(std::size_t begin, std::size_t end, Pairs fluid, const Row* x, Row* sums);
+
 /// For i in [begin, end): rate_i = sum_p w_p (u_i - u_j) . x_ij + u_i . S_i - c_i, a density rate Drho/Dt with
 /// w_p = m_j g_p, S_i = sum_q wb_q x_ik the boundary's weights summed once a step and c_i = sum_q wb_q ub_k . x_ik the
 /// bodies' velocities' share (boundarySum, bodyRate null: none).

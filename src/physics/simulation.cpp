@@ -116,8 +116,9 @@ void Simulation::restore(const SimulationState& s) {
 }
 
 StepContext Simulation::context(Real dt) {
-    return StepContext{dt,         m_time,          m_step,     m_kernel,  m_fluidNeighbours, m_boundaryNeighbours,
-                       m_gradients, m_density,      *m_restDensity, m_boundary, m_stats,        m_loads};
+    return StepContext{dt,          m_time,          m_step,    m_kernel,       m_fluidNeighbours,
+                       m_boundaryNeighbours, m_gradients, m_positionRows, m_density, *m_restDensity,
+                       m_boundary,  m_stats,         m_loads};
 }
 
 std::vector<std::string> Simulation::effectNames() const {
@@ -176,6 +177,7 @@ void Simulation::updateNeighbours(bool mayReorder) {
 void Simulation::computeDensities() {
     const std::size_t n = m_fluid.size();
     m_density.resize(n);
+    m_positionRows.resize(n);
     resizeForRefill(m_gradients.fluid, m_fluidNeighbours.pairs());
     resizeForRefill(m_gradients.boundary, m_boundaryNeighbours.pairs());
     const auto& x = m_fluid.x();
@@ -184,6 +186,9 @@ void Simulation::computeDensities() {
     const auto& f = m_fluidNeighbours;
     const auto& b = m_boundaryNeighbours;
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        sweeps::toRows(begin, end, x.data(), m_positionRows.data());
+    });
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         // The squared distances of the block's pairs first, then the kernel on all of them in one vectorised pass,
         // then the sums: rho_i = sum_j m_j W_ij + sum_k Psi_k W_ik, with Psi_k = rho_0 V_k [AIA+12].
         const std::size_t f0 = f.first(begin), nf = f.first(end) - f0, b0 = b.first(begin), nb = b.first(end) - b0;
@@ -191,11 +196,10 @@ void Simulation::computeDensities() {
         wf.resize(nf), wb.resize(nb);
         Real* gf = m_gradients.fluid.data() + f0;
         Real* gb = m_gradients.boundary.data() + b0;
-        for (std::size_t i = begin; i < end; ++i) {
-            for (std::size_t p = f.first(i); p < f.last(i); ++p) gf[p - f0] = (x[i] - x[f.indices[p]]).squaredNorm();
+        sweeps::squaredDistances(begin, end, f, m_positionRows.data(), gf);
+        for (std::size_t i = begin; i < end; ++i)
             for (std::size_t p = b.first(i); p < b.last(i); ++p)
                 gb[p - b0] = (x[i] - m_boundary.x[b.indices[p]]).squaredNorm();
-        }
         m_kernel.valuesAndGradients(nf, gf, wf.data());
         m_kernel.valuesAndGradients(nb, gb, wb.data());
         for (std::size_t i = begin; i < end; ++i) {

@@ -13,6 +13,7 @@
 #include "physics/bodies.h"
 #include "physics/contact.h"
 #include "physics/effect.h"
+#include "physics/pair_sweeps.h"
 #include "physics/setup.h"
 
 #include <array>
@@ -69,6 +70,7 @@ struct StepContext {
     const NeighbourList& fluidNeighbours;     ///< fluid-fluid, at the current positions
     const NeighbourList& boundaryNeighbours;  ///< fluid-boundary
     const PairGradients& gradients;           ///< of both lists' pairs
+    const sweeps::Rows& positionRows;         ///< the fluid's positions as the pair sweeps read them
     const std::vector<Real>& density;         ///< [kg/m^3], at the current positions
     const std::vector<Real>& restDensity;     ///< rho_0 of each particle [kg/m^3]
     const BoundaryParticles& boundary;
@@ -138,6 +140,7 @@ public:
     const NeighbourList& fluidNeighbours() const { return m_fluidNeighbours; }
     const NeighbourList& boundaryNeighbours() const { return m_boundaryNeighbours; }
     const PairGradients& gradients() const { return m_gradients; }
+    const sweeps::Rows& positionRows() const { return m_positionRows; }
     /// Names of the effects that run, in the order they were made (the scene's, then emitters).
     std::vector<std::string> effectNames() const;
     /// Every effect's time and counters.
@@ -188,6 +191,7 @@ private:
     UniformGrid m_fluidGrid, m_boundaryGrid;
     NeighbourList m_fluidNeighbours, m_boundaryNeighbours;
     PairGradients m_gradients;
+    sweeps::Rows m_positionRows;  // taken with the densities, after each neighbour search
     std::vector<Real> m_density;
     std::vector<Real>* m_restDensity;  // a particle attribute, so it moves with reordering and removal
     Contact m_contact;

@@ -55,7 +55,7 @@ void PressureDFSPH::ratesOfRows(const StepContext& ctx, std::size_t n, bool with
     out.resize(n);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         sweeps::densityRate(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
-                            withBodies ? m_bodyRate.data() : nullptr, m_positionRows.data(), m_velocityRows.data(),
+                            withBodies ? m_bodyRate.data() : nullptr, ctx.positionRows.data(), m_velocityRows.data(),
                             out.data());
     });
 }
@@ -66,7 +66,7 @@ void PressureDFSPH::velocityChanges(const StepContext& ctx, const ParticleSet& p
     if (rows) m_velocityRows.resize(particles.size());
     forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::pressureChange(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
-                               m_positionRows.data(), s.data(), ctx.dt, out.data(),
+                               ctx.positionRows.data(), s.data(), ctx.dt, out.data(),
                                rows ? m_velocityRows.data() : nullptr);
     });
 }
@@ -83,17 +83,15 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     resizeForRefill(m_boundaryWeights, b.pairs());
     m_boundarySum.resize(n);
     m_bodyRate.resize(n);
-    m_positionRows.resize(n);
-    forEachParticle(n, [&](std::size_t i) {
-        sweeps::toRows(i, i + 1, x.data(), m_positionRows.data());
-        Vec3 sum = Vec3::Zero();
-        Real squares = 0;
-        for (std::size_t p = f.first(i); p < f.last(i); ++p) {
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t p = f.first(begin); p < f.first(end); ++p)
             m_weights[p] = sweeps::PairWeight(m[f.indices[p]] * ctx.gradients.fluid[p]);
-            const Vec3 g = Real(m_weights[p]) * (x[i] - x[f.indices[p]]);
-            sum += g;
-            squares += g.squaredNorm();
-        }
+        thread_local sweeps::Rows fluidSums;
+        fluidSums.resize(end - begin);
+        sweeps::gradientSums(begin, end, {&f, m_weights.data()}, ctx.positionRows.data(), fluidSums.data());
+        for (std::size_t i = begin; i < end; ++i) {
+        Vec3 sum = fluidSums[i - begin].head<3>();
+        const Real squares = fluidSums[i - begin][3];
         Vec3 boundary = Vec3::Zero();
         Real bodies = 0;
         for (std::size_t p = b.first(i); p < b.last(i); ++p) {
@@ -110,6 +108,7 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
         // Particles with (almost) no neighbours get no pressure: a lone particle cannot be compressed.
         const Real scale = m[i] / h4;
         m_factor[i] = denominator > 1e-8 * scale * scale ? 1 / denominator : 0;
+        }
     });
 }
 

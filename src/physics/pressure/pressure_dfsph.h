@@ -75,7 +75,7 @@ private:
     std::vector<Real> m_error, m_direction, m_product, m_change, m_residual, m_rate;
     std::vector<Vec3> m_velocityChange;
     // The sweeps' rows: the positions (taken with the factors) and a rate's velocities.
-    sweeps::Rows m_positionRows, m_velocityRows;
+    sweeps::Rows m_velocityRows;
 };
 
 }  // namespace ganache

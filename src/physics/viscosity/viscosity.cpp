@@ -195,49 +195,35 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
     resizeForRefill(m_boundaryPairs, sticky() ? b.pairs() : 0);
     m_fluidBlocks.resize(particles.size());
     const Real* rho = ctx.density.data();
-    const Real* g = ctx.gradients.fluid.data();
     const Real scale = m_weights.scale();
-    const bool varies = m_mu.varies();
     m_inverseDensity.resize(particles.size());
     forEachParticle(particles.size(), [&](std::size_t i) { m_inverseDensity[i] = 1 / rho[i]; }, 4096);
+    // 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)) g_ij, mu and m averaged over the pair so that the
+    // operator is symmetric [Eq. 9], with LaplacianWeights' scale for 2(d+2) and its shape; the diagonal blocks in the
+    // same pass (taken in three, the distances, the weights and the blocks, they cost twice as much on buckling).
+    sweeps::ViscousWeightTerms terms;
+    terms.gradient = ctx.gradients.fluid.data();
+    terms.mass = m.data();
+    terms.inverseDensity = m_inverseDensity.data();
+    terms.mu = m_mu.values();
+    terms.muConstant = m_mu(0);
+    terms.c = 0.25 * scale;
+    terms.eps = eps;
+    terms.inverseSpacing2 = m_weights.inverseSpacing2();
+    terms.linear = m_weights.linear();
+    terms.quadratic = m_weights.quadratic();
     forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
-        // 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)) g_ij, mu and m averaged over the pair so that the
-        // operator is symmetric [Eq. 9], to the last bit (every factor is symmetric in i and j and they are multiplied
-        // in one order), with LaplacianWeights' scale for 2(d+2) and its shape; the diagonal block sums
-        // k_ij x_ij x_ij^T (six distinct entries). The block's g_ij shape / (|x_ij|^2 + 0.01 h^2) first, in one pass
-        // that vectorises (its division was a quarter of this function's time when taken pair by pair).
-        const std::size_t p0 = f.first(begin), count = f.first(end) - p0;
-        thread_local std::vector<Real> shaped;
-        shaped.resize(count);
-        Real* k = shaped.data();
-        for (std::size_t i = begin; i < end; ++i)
-            for (std::size_t p = f.first(i); p < f.last(i); ++p) k[p - p0] = (x[i] - x[f.indices[p]]).squaredNorm();
-        for (std::size_t q = 0; q < count; ++q) k[q] = g[p0 + q] * m_weights.shape(k[q]) / (k[q] + eps);
+        sweeps::viscousWeights(begin, end, f, ctx.positionRows.data(), terms, m_pairs.data(), m_fluidBlocks.data());
+        if (!sticky()) return;
+        // 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) g_ik [Eq. 11-12], weighted as the fluid's pairs: the
+        // wall's particles stand in for fluid moving with it
         for (std::size_t i = begin; i < end; ++i) {
-            const Real mui = m_mu(i), mi = m[i], ri = m_inverseDensity[i];
-            Real b00 = 0, b01 = 0, b02 = 0, b11 = 0, b12 = 0, b22 = 0;
-            for (std::size_t p = f.first(i); p < f.last(i); ++p) {
-                const std::uint32_t j = f.indices[p];
-                const Vec3 xij = x[i] - x[j];
-                const Real muj = varies ? m_mu(j) : mui;
-                const sweeps::PairWeight stored(0.25 * scale * (mui + muj) * (mi + m[j]) * k[p - p0] *
-                                                (ri * m_inverseDensity[j]));
-                m_pairs[p] = stored;
-                const Real kp = stored;
-                b00 += kp * xij.x() * xij.x(), b01 += kp * xij.x() * xij.y(), b02 += kp * xij.x() * xij.z();
-                b11 += kp * xij.y() * xij.y(), b12 += kp * xij.y() * xij.z(), b22 += kp * xij.z() * xij.z();
-            }
-            m_fluidBlocks[i] << b00, b01, b02, b01, b11, b12, b02, b12, b22;
-            // 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) g_ik [Eq. 11-12], weighted as the fluid's pairs: the
-            // wall's particles stand in for fluid moving with it
-            if (sticky()) {
-                const Real cb = scale * m_params.boundaryMu * ctx.restDensity[i] * (ri * ri);
-                for (std::size_t p = b.first(i); p < b.last(i); ++p) {
-                    const std::uint32_t kb = b.indices[p];
-                    const Real d2 = (x[i] - ctx.boundary.x[kb]).squaredNorm();
-                    m_boundaryPairs[p] =
-                        cb * ctx.boundary.volume[kb] * ctx.gradients.boundary[p] * m_weights.shape(d2) / (d2 + eps);
-                }
+            const Real cb = scale * m_params.boundaryMu * ctx.restDensity[i] * (m_inverseDensity[i] * m_inverseDensity[i]);
+            for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+                const std::uint32_t kb = b.indices[p];
+                const Real d2 = (x[i] - ctx.boundary.x[kb]).squaredNorm();
+                m_boundaryPairs[p] =
+                    cb * ctx.boundary.volume[kb] * ctx.gradients.boundary[p] * m_weights.shape(d2) / (d2 + eps);
             }
         }
     });

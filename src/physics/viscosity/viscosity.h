@@ -64,6 +64,10 @@ public:
         const Real u = d2 * m_inverseSpacing2 - 1;
         return m_reshaped ? 1 + u * (kShapeLinear + u * kShapeQuadratic) : Real(1);
     }
+    Real inverseSpacing2() const { return m_inverseSpacing2; }
+    /// The shape's coefficients: 0 for the paper's weights.
+    Real linear() const { return m_reshaped ? kShapeLinear : 0; }
+    Real quadratic() const { return m_reshaped ? kShapeQuadratic : 0; }
 
     // 1 + a u + b u^2 with u = d2 / s^2 - 1: the two conditions on (a, b) are that the lattice's sums of the
     // pairs' weights times x^4 and times 3 x^2 y^2 agree (no preferred shear direction) and that the lattice's sum
@@ -92,6 +96,8 @@ public:
     Real operator()(std::size_t i) const { return m_perParticle ? (*m_perParticle)[i] : m_mu; }
     /// Whether particles differ in viscosity.
     bool varies() const { return m_perParticle != nullptr; }
+    /// Each particle's viscosity, or null when they share one.
+    const Real* values() const { return m_perParticle ? m_perParticle->data() : nullptr; }
 
 private:
     Real m_mu = 0;

@@ -66,7 +66,7 @@ Real ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& pa
     });
     return deterministicBlockSum(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::viscousProduct(begin, end, {&ctx.fluidNeighbours, pairs().data()},
-                               sticky() ? m_boundaryBlock.data() : nullptr, m_positionRows.data(), m_inputRows.data(),
+                               sticky() ? m_boundaryBlock.data() : nullptr, ctx.positionRows.data(), m_inputRows.data(),
                                ctx.dt, out.data());
         Real s = 0;
         for (std::size_t i = begin; i < end; ++i) s += in[i].dot(out[i]);
@@ -164,10 +164,9 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     const std::vector<Vec3>* earlier = earlierChange();
     m_start.resize(n);
     m_guess.resize(n);
-    for (auto* rows : {&m_positionRows, &m_inputRows, &m_inputRows2}) rows->resize(n);
+    for (auto* rows : {&m_inputRows, &m_inputRows2}) rows->resize(n);
     if (last) m_inputRows3.resize(n), m_lastProduct.resize(n), m_earlierProduct.resize(n);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
-        sweeps::toRows(begin, end, x.data(), m_positionRows.data());
         sweeps::toRows(begin, end, v.data(), m_inputRows.data());
         sweeps::toRows(begin, end, last ? last->data() : out.data(), m_inputRows2.data());
         if (last) sweeps::toRows(begin, end, earlier->data(), m_inputRows3.data());
@@ -176,11 +175,11 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     const Mat3* boundary = sticky() ? m_boundaryBlock.data() : nullptr;
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         if (last)
-            sweeps::viscousProducts(begin, end, fluidPairs, boundary, m_positionRows.data(), m_inputRows.data(),
+            sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), m_inputRows.data(),
                                     m_inputRows2.data(), m_inputRows3.data(), dt, m_start.data(),
                                     m_lastProduct.data(), m_earlierProduct.data());
         else
-            sweeps::viscousProducts(begin, end, fluidPairs, boundary, m_positionRows.data(), m_inputRows.data(),
+            sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), m_inputRows.data(),
                                     m_inputRows2.data(), dt, m_start.data(), m_guess.data());
     });
     if (last) leastEnergyGuess(m_b, v, m_start, *last, m_lastProduct, *earlier, m_earlierProduct, out, m_guess);

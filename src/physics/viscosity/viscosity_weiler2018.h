@@ -38,7 +38,7 @@ private:
     std::vector<std::uint32_t> m_nearBoundary;  // the particles with a boundary part
     std::vector<Vec3> m_start, m_guess;         // M v and M out before CG
     std::vector<Vec3> m_lastProduct, m_earlierProduct;  // M lastChange() and M earlierChange() for the warm start
-    sweeps::Rows m_positionRows, m_inputRows, m_inputRows2, m_inputRows3;  // the sweeps' rows: positions, inputs
+    sweeps::Rows m_inputRows, m_inputRows2, m_inputRows3;  // the sweeps' rows of the products' inputs
     RigidModes m_rigid;
     ClusterModes m_clusters;
     std::vector<std::uint8_t> m_group;  // each particle's group of clusters (see solve())
