@@ -21,7 +21,7 @@ namespace detail {
 // and on the buckling anchor's 2,618 particles a pressure sweep took as long on 2 threads as on 1. Past that the
 // particles' data does not stay in the caches from one pass to the next, and the passes are scheduled dynamically so
 // that a thread that falls behind has blocks taken from it (equal shares made a viscous product of 1M particles on 2
-// threads 1.1-1.4 times slower).
+// threads 1.1-1.5 times slower).
 constexpr std::size_t kParticleBlock = 256;
 constexpr std::size_t kSharesUpTo = std::size_t(1) << 16;
 
