@@ -98,5 +98,73 @@ TEST(PairSweeps, TakeTheDensityRateAndThePressuresVelocityChangeAsDefinedPairByP
     }
 }
 
+TEST(PairSweeps, TakeTheSquaredDistancesAndThePushSumsAsDefinedPairByPair) {
+    const Field f = field(40);
+    std::vector<Real> d2(f.list.pairs());
+    sweeps::squaredDistances(0, f.x.size(), f.list, f.xRows.data(), d2.data());
+    sweeps::Rows sums(f.x.size());
+    sweeps::gradientSums(0, f.x.size(), {&f.list, f.weight.data()}, f.xRows.data(), sums.data());
+    // a range that starts further on writes from its first pair (distances) and particle (sums) on
+    std::vector<Real> d2Later(f.list.pairs() - f.list.first(13));
+    sweeps::squaredDistances(13, f.x.size(), f.list, f.xRows.data(), d2Later.data());
+    sweeps::Rows sumsLater(f.x.size() - 13);
+    sweeps::gradientSums(13, f.x.size(), {&f.list, f.weight.data()}, f.xRows.data(), sumsLater.data());
+    for (std::size_t i = 0; i < f.x.size(); ++i) {
+        Vec3 sum = Vec3::Zero();
+        Real squares = 0;
+        for (std::size_t p = f.list.first(i); p < f.list.last(i); ++p) {
+            const Vec3 d = f.x[i] - f.x[f.list.indices[p]];
+            EXPECT_NEAR(d2[p], d.squaredNorm(), kTolerance) << "pair " << p;
+            if (i >= 13) {
+                EXPECT_EQ(d2Later[p - f.list.first(13)], d2[p]) << "pair " << p;
+            }
+            const Vec3 g = Real(f.weight[p]) * d;
+            sum += g;
+            squares += g.squaredNorm();
+        }
+        EXPECT_LT((sums[i].head<3>() - sum).norm(), kTolerance) << "particle " << i;
+        EXPECT_NEAR(sums[i][3], squares, kTolerance) << "particle " << i;
+        if (i >= 13) {
+            EXPECT_EQ(sumsLater[i - 13], sums[i]) << "particle " << i;
+        }
+    }
+}
+
+TEST(PairSweeps, TakeTheViscousWeightsAndBlocksAsDefinedPairByPair) {
+    Field f = field(40);
+    std::mt19937_64 rng(11);
+    std::uniform_real_distribution<Real> positive(0.5, 2);
+    std::vector<Real> gradient, mass, inverseDensity, mu;
+    for (std::size_t p = 0; p < f.list.pairs(); ++p) gradient.push_back(-positive(rng));
+    for (std::size_t i = 0; i < f.x.size(); ++i)
+        mass.push_back(positive(rng)), inverseDensity.push_back(positive(rng)), mu.push_back(positive(rng));
+    for (const bool varies : {false, true}) {
+        sweeps::ViscousWeightTerms t;
+        t.gradient = gradient.data(), t.mass = mass.data(), t.inverseDensity = inverseDensity.data();
+        t.mu = varies ? mu.data() : nullptr;
+        t.muConstant = 1.7, t.c = 0.3, t.eps = 0.01, t.inverseSpacing2 = 4, t.linear = 0.1, t.quadratic = 0.8;
+        sweeps::PairWeights weights(f.list.pairs());
+        std::vector<Mat3> blocks(f.x.size());
+        sweeps::viscousWeights(0, f.x.size(), f.list, f.xRows.data(), t, weights.data(), blocks.data());
+        for (std::size_t i = 0; i < f.x.size(); ++i) {
+            Mat3 block = Mat3::Zero();
+            for (std::size_t p = f.list.first(i); p < f.list.last(i); ++p) {
+                const std::size_t j = f.list.indices[p];
+                const Vec3 d = f.x[i] - f.x[j];
+                const Real u = d.squaredNorm() * t.inverseSpacing2 - 1;
+                const Real muI = varies ? mu[i] : t.muConstant, muJ = varies ? mu[j] : t.muConstant;
+                const Real k = t.c * (muI + muJ) * (mass[i] + mass[j]) * gradient[p] *
+                               (1 + u * (t.linear + u * t.quadratic)) / (d.squaredNorm() + t.eps) *
+                               (inverseDensity[i] * inverseDensity[j]);
+                // stored in single precision: within its rounding of the double value
+                EXPECT_NEAR(weights[p], k, 1e-6 * std::abs(k)) << "pair " << p;
+                block += Real(weights[p]) * d * d.transpose();
+            }
+            // the weights reach hundreds here (the shape's quadratic at |x_ij| up to 3.5): relative round-off
+            EXPECT_LT((blocks[i] - block).norm(), kTolerance * std::max(Real(1), block.norm())) << "particle " << i;
+        }
+    }
+}
+
 }  // namespace
 }  // namespace ganache
