@@ -123,7 +123,7 @@ void triad(benchmark::State& state) {
     for (auto _ : state) {
         forEachBlock(n, [&](std::size_t begin, std::size_t end) {
             for (std::size_t i = begin; i < end; ++i) a[i] = b[i] + 3 * c[i];
-        });
+        }, 1 << 16);
         benchmark::DoNotOptimize(a.data());
     }
     state.SetBytesProcessed(std::int64_t(state.iterations() * 3 * 8 * n));

@@ -112,7 +112,7 @@ std::vector<std::uint8_t> insideMesh(const MeshShape& shape, const std::vector<V
     const WindingNumber w(*shape.mesh);
     const auto [lo, hi] = shape.mesh->bounds();
     std::vector<std::uint8_t> inside(points.size(), 0);
-    forEachItem(points.size(), [&](std::size_t i) {
+    forEachParticle(points.size(), [&](std::size_t i) {
         const Vec3& p = points[i];
         if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) inside[i] = w.at(p) > 0.5;
     }, 256);

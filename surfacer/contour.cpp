@@ -507,7 +507,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     // voxel (a trimmed band, a thread): the leaves below the tree's that it lacks are stood in for by leaves of their
     // tile's value, so that such cells get vertices too.
     std::vector<std::vector<openvdb::Coord>> missingBelow(leaves.size());
-    forEachRange(leaves.size(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> probe(tree);
         for (std::size_t l = begin; l != end; ++l)
             for (int n = 1; n < 8; ++n) {
@@ -523,7 +523,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
     // Only where a voxel of the leaves above, next to this tile, lies on the other side of the surface.
     std::vector<std::uint8_t> crossed(missing.size(), 0);
-    forEachRange(missing.size(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(missing.size(), [&](std::size_t begin, std::size_t end) {
         openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> probe(tree);
         for (std::size_t m = begin; m != end; ++m) {
             const openvdb::Coord& o = missing[m];
@@ -561,7 +561,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     std::vector<std::unique_ptr<const Configs>> configsOf(leaves.size());
     std::vector<std::vector<std::pair<openvdb::Coord, int>>> tunnels(leaves.size());
     const FlippedFaces none;
-    forEachRange(leaves.size(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         LeafNeighbourhood at(tree);
         for (std::size_t l = begin; l != end; ++l) {
             at.gather(*leaves[l]);
@@ -611,7 +611,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
         if (!vertices[l].x.empty()) ids.touchLeaf(leaves[l]->origin());
     points.resize(offset.back());
     const openvdb::math::Transform& transform = grid.transform();
-    forEachRange(leaves.size(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         openvdb::tree::ValueAccessor<IdTree, false> access(ids);
         for (std::size_t l = begin; l != end; ++l) {
             const LeafVertices& v = vertices[l];
@@ -630,7 +630,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
 
     // Faces: each crossed edge starting at a leaf's voxel joins the four cells around it.
     std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(leaves.size());
-    forEachRange(leaves.size(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         IdNeighbourhood id(ids);
         for (std::size_t l = begin; l != end; ++l) {
             if (offset[l + 1] == offset[l]) continue;

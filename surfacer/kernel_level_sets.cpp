@@ -76,7 +76,7 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     const std::vector<Real>& sz = grid.sortedCoords(2);
     std::vector<Ellipsoid> out(x.size());
     tbb::enumerable_thread_specific<CellCandidates> scratch;
-    forEachRange(grid.cellCount(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(grid.cellCount(), [&](std::size_t begin, std::size_t end) {
         CellCandidates& cand = scratch.local();
         for (std::size_t c = begin; c != end; ++c) {
             cand.gather(grid, grid.cellCoords(c));
@@ -207,7 +207,7 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
     const Vec3& reach = binned.reach;
     const UniformGrid& bins = binned.grid;
     std::vector<FloatLeaf*> made(targets.size(), nullptr);
-    forEachRange(targets.size(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(targets.size(), [&](std::size_t begin, std::size_t end) {
         Field field = prototype;
         for (std::size_t t = begin; t != end; ++t) {
             const LatticeLeaf& target = targets[t];
@@ -433,7 +433,7 @@ openvdb::MaskGrid::Ptr bricksCrossed(const FloatGrid& coarse, float insideBelow,
     coarse.tree().getNodes(leaves);
     std::vector<MaskLeaf*> own(leaves.size(), nullptr);
     std::vector<std::vector<openvdb::Coord>> below(leaves.size());
-    forEachRange(leaves.size(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         // Per point of the leaf and the layer around it (index +1): 1 outside, 2 between, 4 inside.
         LeafNeighbourhood values(coarse.tree());
         std::uint8_t kind[10][10][10];
@@ -528,7 +528,7 @@ std::vector<LatticeLeaf> bricksNearSurface(const FloatGrid& coarse, float inside
 void fieldToDistance(FloatGrid& field, Real voxel, Real halfBand) {
     const float band = float(halfBand * voxel), inv2h = float(0.5 / voxel);
     openvdb::tree::LeafManager<openvdb::FloatTree> leaves(field.tree(), 1);
-    forEachRange(leaves.leafCount(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(leaves.leafCount(), [&](std::size_t begin, std::size_t end) {
         LeafNeighbourhood g(field.tree());  // inactive points read NaN: no value there
         for (std::size_t l = begin; l != end; ++l) {
             const FloatLeaf& leaf = leaves.leaf(l);

@@ -154,14 +154,14 @@ public:
         m_own.resize(n);
         m_around.resize(n);
         while (m_scratch.size() * kLeavesPerBlock < n) m_scratch.emplace_back(new float[512 * kLeavesPerBlock]);
-        forEachRange(n, [&](std::size_t begin, std::size_t end) {
+        forEachBlock(n, [&](std::size_t begin, std::size_t end) {
             for (std::size_t l = begin; l != end; ++l) {
                 m_leaves[l] = &leaves.leaf(l);
                 m_leaves[l]->setTransientData(openvdb::Index32(l));
                 m_own[l] = m_leaves[l]->buffer().data();
             }
         }, 256);
-        forEachRange(n, [&](std::size_t begin, std::size_t end) {
+        forEachBlock(n, [&](std::size_t begin, std::size_t end) {
             openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> acc(tree);
             for (std::size_t l = begin; l != end; ++l) {
                 const openvdb::Coord o = m_leaves[l]->origin();
@@ -190,7 +190,7 @@ public:
     // one SIMD evaluation instead of one iterator step and call per voxel.
     template <class Step>
     void pass(Step&& step, const Options& options) {
-        forEachRange(m_leaves.size(), [&](std::size_t begin, std::size_t end) {
+        forEachBlock(m_leaves.size(), [&](std::size_t begin, std::size_t end) {
             LeafNeighbourhood at(*m_tree);
             for (std::size_t l = begin; l != end; ++l) {
                 const float* data[3][3][3];
@@ -233,7 +233,7 @@ public:
     // The values back in the leaves' buffers (after an odd number of passes they are in the array).
     void finish() {
         if (!m_inScratch) return;
-        forEachRange(m_leaves.size(), [&](std::size_t begin, std::size_t end) {
+        forEachBlock(m_leaves.size(), [&](std::size_t begin, std::size_t end) {
             for (std::size_t l = begin; l != end; ++l) std::copy_n(values(l, true), 512, m_own[l]);
         }, 64);
         m_inScratch = false;

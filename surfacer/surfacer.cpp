@@ -53,7 +53,7 @@ void trimToBand(FloatGrid& grid) {
     grid.tree().getNodes(leaves);
     using MaskLeaf = openvdb::MaskTree::LeafNodeType;
     std::vector<std::unique_ptr<MaskLeaf>> crossed(leaves.size());
-    forEachRange(leaves.size(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         surfacing::LeafNeighbourhood at(grid.tree());  // a leaf and its neighbours' faces, read once
         for (std::size_t l = begin; l != end; ++l) {
             at.gather(*leaves[l]);
@@ -243,10 +243,10 @@ FrameSurface surfaceParticles(const ParticleSet& fluid, Real r, const SurfaceSet
         if (settings.meshTemperature && temperature && nearest) {
             auto& t = out.m_mesh.temperature;
             t.resize(out.m_mesh.points.size());
-            forEachItem(t.size(), [&](std::size_t k) {
+            forEachParticle(t.size(), [&](std::size_t k) {
                 const std::int64_t j = nearest->find(out.m_mesh.points[k]);
                 t[k] = j < 0 ? 0.f : float((*temperature)[std::size_t(j)]);
-            }, 512);
+            });
         }
     }
     return out;

@@ -333,7 +333,7 @@ void Simulation::step(Real maxDt) {
         if (!m_boundary.x.empty()) m_contact.apply(ctx, m_fluid, m_boundaryGrid);
         auto& x = m_fluid.x();
         const auto& v = m_fluid.v();
-        forEachParticle(x.size(), [&](std::size_t i) { x[i] += dt * v[i]; });
+        forEachParticle(x.size(), [&](std::size_t i) { x[i] += dt * v[i]; }, 4096);
         removeEscaped();
     }
     const std::size_t before = m_fluid.size();
@@ -394,7 +394,7 @@ void Simulation::writeAt(Real t, const FrameWriter& write) {
         std::vector<Vec3>& end;
         ~Restore() { x.swap(end); }
     } restore{x, end};
-    forEachParticle(x.size(), [&](std::size_t i) { x[i] -= back * v[i]; });
+    forEachParticle(x.size(), [&](std::size_t i) { x[i] -= back * v[i]; }, 4096);
     write(m_fluid, m_boundary.movingBodies(t));
 }
 

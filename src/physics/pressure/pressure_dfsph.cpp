@@ -118,7 +118,7 @@ void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Rea
     // can only push them further apart: see kSeparated.
     forEachParticle(particles.size(), [&](std::size_t i) {
         s[i] = ctx.density[i] < (1 - kSeparated) * ctx.restDensity[i] ? 0 : s[i] * scale;
-    });
+    }, 4096);
     auto& v = particles.v();
     velocityChanges(ctx, particles, s, m_velocityChange);
     // On a body the viscosity solve moves as one, the warm start's push is spread over the whole body before the
@@ -141,11 +141,11 @@ void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Rea
         const Real push = sums.head<3>().norm(), limit = sums[3];
         if (push > limit) {
             const Real alpha = limit / push;
-            forEachParticle(particles.size(), [&](std::size_t i) { if ((*rigid)[i] != 0) s[i] *= alpha; });
+            forEachParticle(particles.size(), [&](std::size_t i) { if ((*rigid)[i] != 0) s[i] *= alpha; }, 4096);
             velocityChanges(ctx, particles, s, m_velocityChange);
         }
     }
-    forEachParticle(particles.size(), [&](std::size_t i) { v[i] += m_velocityChange[i]; });
+    forEachParticle(particles.size(), [&](std::size_t i) { v[i] += m_velocityChange[i]; }, 4096);
     addBoundaryLoads(ctx, particles, s);
 }
 
@@ -201,7 +201,7 @@ std::size_t PressureDFSPH::solveJacobi(Solve which, StepContext& ctx, ParticleSe
             pressure[i] = next;
         });
         velocityChanges(ctx, particles, m_change, m_velocityChange);
-        forEachParticle(n, [&](std::size_t i) { v[i] += m_velocityChange[i]; });
+        forEachParticle(n, [&](std::size_t i) { v[i] += m_velocityChange[i]; }, 4096);
     }
 }
 
@@ -290,7 +290,7 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
         const Real g = gamma(error);
         if (measured[1] > g * g * measured[2]) {
             // Proportioning: release the particles at zero pressure that their neighbours compress.
-            forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * chopped(i); });
+            forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * chopped(i); }, 4096);
             multiply(z);
             using Vec2 = Eigen::Matrix<Real, 2, 1>;
             const Vec2 zq = deterministicSum<Vec2>(n, [&](std::size_t i) {
@@ -302,7 +302,7 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
             restart = true;
             continue;
         }
-        if (restart) forEachParticle(n, [&](std::size_t i) { dir[i] = inverseD(i) * free(i); });
+        if (restart) forEachParticle(n, [&](std::size_t i) { dir[i] = inverseD(i) * free(i); }, 4096);
         restart = false;
         multiply(dir);
         // d . q, free . d, and the longest step that keeps every pressure >= 0.
@@ -341,7 +341,7 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
             forEachParticle(n, [&](std::size_t i) {
                 moveOne(i, sums.feasible, dir);
                 z[i] = pressure[i] - std::max<Real>(pressure[i] - kRelaxation * inverseD(i) * free(i), 0);
-            });
+            }, 4096);
             multiply(z);
             measured = updateAndMeasure([&](std::size_t i) {
                 q[i] *= -ctx.dt;

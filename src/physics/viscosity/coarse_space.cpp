@@ -6,7 +6,6 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseCore>
-#include <tbb/parallel_reduce.h>
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
@@ -240,11 +239,11 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
     m_firstMember.push_back(std::uint32_t(inside));
     m_centre.resize(clusters);
     if (clusters == 0) return;
-    forEachItem(clusters, [&](std::size_t c) {
+    forEachParticle(clusters, [&](std::size_t c) {
         Vec3 sum = Vec3::Zero();
         for (std::uint32_t k = m_firstMember[c]; k < m_firstMember[c + 1]; ++k) sum += x[m_members[k]];
         m_centre[c] = sum / Real(m_firstMember[c + 1] - m_firstMember[c]);
-    }, 512);
+    });
     std::vector<char> hasExtra;
     if (extra) {
         hasExtra.assign(n, 0);
@@ -253,7 +252,7 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
 
     // Each cluster's row of E: its diagonal block and its blocks with the adjacent clusters.
     std::vector<std::vector<std::pair<std::uint32_t, Mat6>>> rows(clusters);
-    forEachItem(clusters, [&](std::size_t c) {
+    forEachParticle(clusters, [&](std::size_t c) {
         Mat6 diagonal = Mat6::Zero();
         std::vector<std::pair<std::uint32_t, Mat6>> offDiagonal;
         std::size_t last = 0;  // the block of the previous pair, usually the one wanted again
@@ -294,7 +293,7 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
         rows[c].emplace_back(std::uint32_t(c), diagonal);
         rows[c].insert(rows[c].end(), offDiagonal.begin(), offDiagonal.end());
         std::sort(rows[c].begin(), rows[c].end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-    }, 512);
+    });
 
     m_factor.factor(rows);
     m_rhs.resize(Eigen::Index(6 * clusters));
@@ -302,7 +301,7 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
 
 void ClusterModes::addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const {
     if (clusters() == 0) return;
-    forEachItem(clusters(), [&](std::size_t c) {
+    forEachParticle(clusters(), [&](std::size_t c) {
         Vec6 y = Vec6::Zero();
         for (std::uint32_t k = m_firstMember[c]; k < m_firstMember[c + 1]; ++k) {
             const std::uint32_t i = m_members[k];
