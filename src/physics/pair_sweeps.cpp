@@ -23,7 +23,9 @@ inline Lanes operator*(Lanes a, Lanes b) { return {_mm256_mul_pd(a.v, b.v)}; }
 inline Lanes operator/(Lanes a, Lanes b) { return {_mm256_div_pd(a.v, b.v)}; }
 inline Lanes zero() { return {_mm256_setzero_pd()}; }
 // a[j[0]], ..., a[j[3]]
-inline Lanes gather(const Real* a, const std::size_t (&j)[4]) { return {_mm256_setr_pd(a[j[0]], a[j[1]], a[j[2]], a[j[3]])}; }
+inline Lanes gather(const Real* a, const std::size_t (&j)[4]) {
+    return {_mm256_setr_pd(a[j[0]], a[j[1]], a[j[2]], a[j[3]])};
+}
 // a[0, count), zero beyond
 inline Lanes loadFirst(const Real* a, int count) {
     if (count == 4) return {_mm256_loadu_pd(a)};
@@ -214,8 +216,9 @@ void squaredDistances(std::size_t begin, std::size_t end, const NeighbourList& l
 void viscousWeights(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x,
                     const ViscousWeightTerms& t, PairWeight* weights, Mat3* blocks) {
     const std::uint32_t* idx = list.indices.data();
-    const Lanes c = broadcast(t.c), eps = broadcast(t.eps), one = broadcast(1), inverseSpacing2 =
-        broadcast(t.inverseSpacing2), linear = broadcast(t.linear), quadratic = broadcast(t.quadratic);
+    const Lanes c = broadcast(t.c), eps = broadcast(t.eps), one = broadcast(1);
+    const Lanes inverseSpacing2 = broadcast(t.inverseSpacing2), linear = broadcast(t.linear),
+                quadratic = broadcast(t.quadratic);
     for (std::size_t i = begin; i < end; ++i) {
         const Lanes xi[3] = {broadcast(x[i][0]), broadcast(x[i][1]), broadcast(x[i][2])};
         const Real mui = t.mu ? t.mu[i] : t.muConstant;

@@ -32,8 +32,8 @@ inline SolveOutcome solveRandomField(const ViscosityParams& params, Real size = 
     Simulation sim = world.simulation(withVelocity([&](const Vec3&) { return Vec3(n(rng), n(rng), n(rng)); }));
     SolverStats stats;
     BodyLoads loads;
-    StepContext ctx{0.01, 0, 0, sim.kernel(), sim.fluidNeighbours(), sim.boundaryNeighbours(), sim.gradients(), sim.positionRows(), sim.density(),
-                    sim.restDensity(), sim.boundary(), stats, loads};
+    StepContext ctx{0.01, 0, 0, sim.kernel(), sim.fluidNeighbours(), sim.boundaryNeighbours(), sim.gradients(),
+                    sim.positionRows(), sim.density(), sim.restDensity(), sim.boundary(), stats, loads};
     ParticleSet particles = sim.particles();
     const auto effect = makeViscosity(params, world.finalSetup(), particles);
     effect->apply(ctx, particles);

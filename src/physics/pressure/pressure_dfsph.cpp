@@ -90,24 +90,24 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
         fluidSums.resize(end - begin);
         sweeps::gradientSums(begin, end, {&f, m_weights.data()}, ctx.positionRows.data(), fluidSums.data());
         for (std::size_t i = begin; i < end; ++i) {
-        Vec3 sum = fluidSums[i - begin].head<3>();
-        const Real squares = fluidSums[i - begin][3];
-        Vec3 boundary = Vec3::Zero();
-        Real bodies = 0;
-        for (std::size_t p = b.first(i); p < b.last(i); ++p) {
-            const std::uint32_t k = b.indices[p];
-            m_boundaryWeights[p] = kWall * ctx.restDensity[i] * ctx.boundary.volume[k] * ctx.gradients.boundary[p];
-            const Vec3 g = m_boundaryWeights[p] * (x[i] - ctx.boundary.x[k]);
-            boundary += g;
-            bodies += ctx.boundary.v[k].dot(g);
-        }
-        m_boundarySum[i] = boundary;
-        m_bodyRate[i] = bodies;
-        sum += boundary;
-        const Real denominator = sum.squaredNorm() + squares;
-        // Particles with (almost) no neighbours get no pressure: a lone particle cannot be compressed.
-        const Real scale = m[i] / h4;
-        m_factor[i] = denominator > 1e-8 * scale * scale ? 1 / denominator : 0;
+            Vec3 sum = fluidSums[i - begin].head<3>();
+            const Real squares = fluidSums[i - begin][3];
+            Vec3 boundary = Vec3::Zero();
+            Real bodies = 0;
+            for (std::size_t p = b.first(i); p < b.last(i); ++p) {
+                const std::uint32_t k = b.indices[p];
+                m_boundaryWeights[p] = kWall * ctx.restDensity[i] * ctx.boundary.volume[k] * ctx.gradients.boundary[p];
+                const Vec3 g = m_boundaryWeights[p] * (x[i] - ctx.boundary.x[k]);
+                boundary += g;
+                bodies += ctx.boundary.v[k].dot(g);
+            }
+            m_boundarySum[i] = boundary;
+            m_bodyRate[i] = bodies;
+            sum += boundary;
+            const Real denominator = sum.squaredNorm() + squares;
+            // Particles with (almost) no neighbours get no pressure: a lone particle cannot be compressed.
+            const Real scale = m[i] / h4;
+            m_factor[i] = denominator > 1e-8 * scale * scale ? 1 / denominator : 0;
         }
     });
 }

@@ -74,7 +74,7 @@ private:
     // Scratch of the solvers, kept between steps.
     std::vector<Real> m_error, m_direction, m_product, m_change, m_residual, m_rate;
     std::vector<Vec3> m_velocityChange;
-    // The sweeps' rows: the positions (taken with the factors) and a rate's velocities.
+    // A rate's velocities as the sweeps read them (the positions' rows come with the step context).
     sweeps::Rows m_velocityRows;
 };
 

@@ -218,7 +218,7 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
         // 2(d+2) mu_b Psi_k / (rho_i^2 (|x_ik|^2 + 0.01 h^2)) g_ik [Eq. 11-12], weighted as the fluid's pairs: the
         // wall's particles stand in for fluid moving with it
         for (std::size_t i = begin; i < end; ++i) {
-            const Real cb = scale * m_params.boundaryMu * ctx.restDensity[i] * (m_inverseDensity[i] * m_inverseDensity[i]);
+            const Real ri = m_inverseDensity[i], cb = scale * m_params.boundaryMu * ctx.restDensity[i] * (ri * ri);
             for (std::size_t p = b.first(i); p < b.last(i); ++p) {
                 const std::uint32_t kb = b.indices[p];
                 const Real d2 = (x[i] - ctx.boundary.x[kb]).squaredNorm();
