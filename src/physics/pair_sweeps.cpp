@@ -113,13 +113,13 @@ inline Real sum(Lanes a) {
     return (l[0] + l[1]) + (l[2] + l[3]);
 }
 
-// Calls pair(c, k) for each group of four of particle i's pairs: c[s] the four neighbours' rows of `rows[s]`,
-// transposed (c[s][k]'s lanes are the neighbours' entries k), and k their weights. A tail's missing pairs are particle i itself with weight zero: a
-// pair of a particle with itself has x_ij = 0 and adds nothing.
-template <int S, class Pair>
-inline void forEachGroup(std::size_t i, Pairs fluid, const Row* const (&rows)[S], Pair pair) {
-    const std::uint64_t begin = fluid.list->offsets[i], end = fluid.list->offsets[i + 1];
-    const std::uint32_t* idx = fluid.list->indices.data();
+// Calls group(c, p, count, j) for each group of four of particle i's pairs, p .. p + count: j the four neighbours and
+// c[s] their rows of `rows[s]`, transposed (c[s][k]'s lanes are the neighbours' entries k). A tail's missing pairs are
+// particle i itself: a pair of a particle with itself has x_ij = 0 and, with weight zero, adds nothing.
+template <int S, class Group>
+inline void forEachGroup(std::size_t i, const NeighbourList& list, const Row* const (&rows)[S], Group group) {
+    const std::uint64_t begin = list.offsets[i], end = list.offsets[i + 1];
+    const std::uint32_t* idx = list.indices.data();
     for (std::uint64_t p = begin; p < end; p += 4) {
         const int count = int(std::min<std::uint64_t>(4, end - p));
         std::size_t j[4];
@@ -129,7 +129,7 @@ inline void forEachGroup(std::size_t i, Pairs fluid, const Row* const (&rows)[S]
             const Row* const r[4] = {rows[s] + j[0], rows[s] + j[1], rows[s] + j[2], rows[s] + j[3]};
             transpose(r, c[s]);
         }
-        pair(c, loadWeights(fluid.weight + p, count));
+        group(c, p, count, j);
     }
 }
 
@@ -144,7 +144,9 @@ void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Ma
         Lanes ui[N][3], a[N][3];
         for (int c = 0; c < N; ++c)
             for (int d = 0; d < 3; ++d) ui[c][d] = broadcast(in[c][i][d]), a[c][d] = zero();
-        forEachGroup<N + 1>(i, fluid, rows, [&](const Lanes (&r)[N + 1][4], Lanes k) {
+        forEachGroup<N + 1>(i, *fluid.list, rows, [&](const Lanes (&r)[N + 1][4], std::uint64_t p, int count,
+                                                      const std::size_t (&)[4]) {
+            const Lanes k = loadWeights(fluid.weight + p, count);
             const Lanes d0 = xi[0] - r[0][0], d1 = xi[1] - r[0][1], d2 = xi[2] - r[0][2];
             for (int c = 0; c < N; ++c) {
                 const Lanes (&u)[4] = r[c + 1];
@@ -195,27 +197,22 @@ void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3
 }
 
 void squaredDistances(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x, Real* d2) {
-    const std::uint32_t* idx = list.indices.data();
+    const Row* const rows[1] = {x};
     const std::uint64_t p0 = list.offsets[begin];
     for (std::size_t i = begin; i < end; ++i) {
         const Lanes xi[3] = {broadcast(x[i][0]), broadcast(x[i][1]), broadcast(x[i][2])};
-        const std::uint64_t last = list.offsets[i + 1];
-        for (std::uint64_t p = list.offsets[i]; p < last; p += 4) {
-            const int count = int(std::min<std::uint64_t>(4, last - p));
-            const Row* r[4];
-            for (int l = 0; l < 4; ++l) r[l] = x + (l < count ? idx[p + l] : i);
-            Lanes c[4];
-            transpose(r, c);
-            const Lanes a = xi[0] - c[0], b = xi[1] - c[1], d = xi[2] - c[2];
+        forEachGroup<1>(i, list, rows, [&](const Lanes (&c)[1][4], std::uint64_t p, int count,
+                                           const std::size_t (&)[4]) {
+            const Lanes a = xi[0] - c[0][0], b = xi[1] - c[0][1], d = xi[2] - c[0][2];
             const Row s = row((a * a + b * b) + d * d);
             for (int l = 0; l < count; ++l) d2[p + l - p0] = s[l];
-        }
+        });
     }
 }
 
 void viscousWeights(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x,
                     const ViscousWeightTerms& t, PairWeight* weights, Mat3* blocks) {
-    const std::uint32_t* idx = list.indices.data();
+    const Row* const rows[1] = {x};
     const Lanes c = broadcast(t.c), eps = broadcast(t.eps), one = broadcast(1);
     const Lanes inverseSpacing2 = broadcast(t.inverseSpacing2), linear = broadcast(t.linear),
                 quadratic = broadcast(t.quadratic);
@@ -224,16 +221,10 @@ void viscousWeights(std::size_t begin, std::size_t end, const NeighbourList& lis
         const Real mui = t.mu ? t.mu[i] : t.muConstant;
         const Lanes mi = broadcast(t.mass[i]), ri = broadcast(t.inverseDensity[i]), muiLanes = broadcast(mui);
         Lanes b00 = zero(), b01 = zero(), b02 = zero(), b11 = zero(), b12 = zero(), b22 = zero();
-        const std::uint64_t last = list.offsets[i + 1];
-        for (std::uint64_t p = list.offsets[i]; p < last; p += 4) {
-            // A tail's missing pairs are particle i itself with gradient zero: weight zero.
-            const int count = int(std::min<std::uint64_t>(4, last - p));
-            std::size_t j[4];
-            for (int l = 0; l < 4; ++l) j[l] = l < count ? idx[p + l] : i;
-            const Row* const r[4] = {x + j[0], x + j[1], x + j[2], x + j[3]};
-            Lanes xj[4];
-            transpose(r, xj);
-            const Lanes d0 = xi[0] - xj[0], d1 = xi[1] - xj[1], d2 = xi[2] - xj[2];
+        // A tail's missing pairs get gradient zero: weight zero.
+        forEachGroup<1>(i, list, rows, [&](const Lanes (&xj)[1][4], std::uint64_t p, int count,
+                                           const std::size_t (&j)[4]) {
+            const Lanes d0 = xi[0] - xj[0][0], d1 = xi[1] - xj[0][1], d2 = xi[2] - xj[0][2];
             const Lanes dd = (d0 * d0 + d1 * d1) + d2 * d2;
             const Lanes u = dd * inverseSpacing2 - one;
             const Lanes k = loadFirst(t.gradient + p, count) * (one + u * (linear + u * quadratic)) / (dd + eps);
@@ -245,7 +236,7 @@ void viscousWeights(std::size_t begin, std::size_t end, const NeighbourList& lis
             const Lanes w0 = w * d0, w1 = w * d1;
             b00 = b00 + w0 * d0, b01 = b01 + w0 * d1, b02 = b02 + w0 * d2;
             b11 = b11 + w1 * d1, b12 = b12 + w1 * d2, b22 = b22 + (w * d2) * d2;
-        }
+        });
         const Real s00 = sum(b00), s01 = sum(b01), s02 = sum(b02), s11 = sum(b11), s12 = sum(b12), s22 = sum(b22);
         blocks[i] << s00, s01, s02, s01, s11, s12, s02, s12, s22;
     }
