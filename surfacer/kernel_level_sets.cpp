@@ -59,6 +59,26 @@ Eigen::Vector3f extentAbove(const Vec3& extent) {
     return out;
 }
 
+// The shape A of a kernel from its neighbours' covariance C: along C's axes, the inverse of its eigenvalues raised to
+// at least 1 / kMaxStretch of the largest, scaled to det A = 1 (the kernel's volume, so the interior's sum, does not
+// change). Where no eigenvalue needs raising that is cbrt(det C) C^-1, and no eigenvectors are needed: Gershgorin's
+// discs bound the eigenvalues, and in the fluid's inside (most particles) they lie within a factor kMaxStretch.
+Mat3 shapeFromSpread(const Mat3& covariance) {
+    Real upper = 0, lower = std::numeric_limits<Real>::infinity();
+    for (int i = 0; i < 3; ++i) {
+        const Real radius = std::abs(covariance(i, (i + 1) % 3)) + std::abs(covariance(i, (i + 2) % 3));
+        upper = std::max(upper, covariance(i, i) + radius);
+        lower = std::min(lower, covariance(i, i) - radius);
+    }
+    if (lower > 0 && lower * kMaxStretch >= upper) return std::cbrt(covariance.determinant()) * covariance.inverse();
+    Eigen::SelfAdjointEigenSolver<Mat3> eigen;
+    eigen.computeDirect(covariance);
+    Vec3 scale = eigen.eigenvalues().cwiseMax(eigen.eigenvalues().maxCoeff() / kMaxStretch);
+    scale /= std::cbrt(scale.prod());
+    const Mat3& axes = eigen.eigenvectors();
+    return axes * scale.cwiseInverse().asDiagonal() * axes.transpose();
+}
+
 // Each particle's kernel from the spread of its neighbours within the support. The sums the spread needs are
 // taken in one pass over the 27 grid cells around the particle's own, without storing neighbour lists (which cost
 // as much again as the sums at 1M particles). The 27 cells' points are gathered once for the particles of a cell and
@@ -112,12 +132,7 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                     Mat3 covariance;
                     covariance << q[0], q[3], q[4], q[3], q[1], q[5], q[4], q[5], q[2];
                     covariance = covariance / total - mean * mean.transpose();
-                    Eigen::SelfAdjointEigenSolver<Mat3> eigen;
-                    eigen.computeDirect(covariance);
-                    Vec3 scale = eigen.eigenvalues().cwiseMax(eigen.eigenvalues().maxCoeff() / kMaxStretch);
-                    scale /= std::cbrt(scale.prod());  // keep the kernel's volume: the interior's sum does not change
-                    const Mat3& axes = eigen.eigenvectors();
-                    shape = axes * scale.cwiseInverse().asDiagonal() * axes.transpose();
+                    shape = shapeFromSpread(covariance);
                 }
                 // The ellipsoid {y : |A y| < support} = A^-1 (ball); its box's half size along axis k is
                 // support |row_k A^-1|.
@@ -191,14 +206,15 @@ inline unsigned rowBricks(std::uint64_t bricks, int a, int b) {
 }
 
 // Visits, for each target leaf of a lattice of spacing h [m] (point ijk at h ijk), every row along z of its chosen
-// bricks that a kernel reaches: field.add(kernel, a, b, px, py, pz) with the row's points in the kernel's own
-// coordinates (A y / support; inside where |p| < 1), after field.start(leaf's lowest point [m]); field.value(n)
-// then gives each chosen point's value. Each leaf gathers the kernels whose boxes reach it from a grid of their
-// centres, in that grid's fixed order: deterministic for any thread count. A field whose kernels add nothing
-// outside (Field::kNothingOutside) also takes the rows of a kernel's box that miss the ellipsoid; for the others those
-// rows are skipped. A leaf stops taking kernels once field.settled(): its values are decided as far as they are asked
-// for. A field that may take its kernels in any order (field.orderFree()) takes the leaf's own cell first.
-// Returns the grid of the leaves made (background `background`).
+// bricks that a kernel reaches: field.add(kernel, a, b, q2) with q2 the row's points' squared distances in the
+// kernel's own coordinates (|A y| / support; inside where q2 < 1; rounding may leave it a little below 0 at the
+// centre), after field.start(leaf's lowest point [m]); field.value(n) then gives each chosen point's value. Each leaf
+// gathers the kernels whose boxes reach it from a grid of their centres, in that grid's fixed order: deterministic for
+// any thread count. A field whose kernels add nothing outside (Field::kNothingOutside) also takes the rows of a
+// kernel's box that miss the ellipsoid; for the others those rows are skipped. A leaf stops taking kernels once
+// field.settled(): its values are decided as far as they are asked for. A field that may take its kernels in any
+// order (field.orderFree()) takes the leaf's own cell first. Returns the grid of the leaves made (background
+// `background`).
 template <class Field>
 FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBins& binned,
                           const std::vector<LatticeLeaf>& targets, Real support, float background,
@@ -243,10 +259,16 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                     const float dy[3] = {float(m(0, 1)), float(m(1, 1)), float(m(2, 1))};
                     const float dz[3] = {float(m(0, 2)), float(m(1, 2)), float(m(2, 2))};
                     const float inverseStep = 1.f / (dz[0] * dz[0] + dz[1] * dz[1] + dz[2] * dz[2]);
+                    const RowOfEight dy2 = RowOfEight::Constant(dy[0] * dy[0] + dy[1] * dy[1] + dy[2] * dy[2]);
                     for (int a = aLo; a <= aHi; ++a) {
                         float ua[3];
                         for (int d = 0; d < 3; ++d) ua[d] = u0[d] + float(a) * dx[d];
-                        // A row at once (one vector), at the row's points u + c dz, c = 0..7.
+                        // A row at once (one vector), at the row's points p + b dy with p = ua + c dz, c = 0..7:
+                        // |p + b dy|^2 = |p|^2 + b (2 p.dy + b |dy|^2), the slab's two vectors taken once for its rows.
+                        RowOfEight p[3];
+                        for (int d = 0; d < 3; ++d) p[d] = ua[d] + kRowSteps * dz[d];
+                        const RowOfEight pp = p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
+                        const RowOfEight pdy = 2.f * (p[0] * dy[0] + p[1] * dy[1] + p[2] * dy[2]);
                         const auto row = [&](int b) {
                             if (!rowBricks(target.bricks, a, b)) return;
                             float u[3];
@@ -261,8 +283,8 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                                                                               u[2] * u[2] - 1) * inverseStep;
                                 if (discriminant <= 0) return;
                             }
-                            field.add(e, a, b, u[0] + kRowSteps * dz[0], u[1] + kRowSteps * dz[1],
-                                      u[2] + kRowSteps * dz[2]);
+                            const RowOfEight fb = RowOfEight::Constant(float(b));
+                            field.add(e, a, b, pp + fb * (pdy + fb * dy2));
                         };
 #pragma GCC unroll 2
                         for (int b = bLo; b <= bHi; ++b) row(b);
@@ -311,8 +333,8 @@ public:
     ShapeSum(float scale, float iso, float settleBelow = -std::numeric_limits<float>::infinity())
         : m_scale(scale), m_iso(iso), m_settleBelow(settleBelow) {}
     void start(const Vec3&) { std::fill(m_sum, m_sum + 512, 0.f); }
-    void add(const Ellipsoid&, int a, int b, const RowOfEight& px, const RowOfEight& py, const RowOfEight& pz) {
-        Eigen::Map<RowOfEight>(m_sum + a * 64 + b * 8) += kernelShape(px * px + py * py + pz * pz);
+    void add(const Ellipsoid&, int a, int b, const RowOfEight& q2) {
+        Eigen::Map<RowOfEight>(m_sum + a * 64 + b * 8) += kernelShape(q2);
     }
     float value(int n) const { return valueOf(m_sum[n]); }
     bool orderFree() const { return m_settleBelow > -std::numeric_limits<float>::infinity(); }
@@ -348,8 +370,8 @@ public:
         m_lo = lo;
         for (float* channel : {m_w, m_x, m_y, m_z}) std::fill(channel, channel + 512, 0.f);
     }
-    void add(const Ellipsoid& e, int a, int b, const RowOfEight& px, const RowOfEight& py, const RowOfEight& pz) {
-        const RowOfEight t = (1.f - (px * px + py * py + pz * pz)).max(0.f), w = t * t * t;
+    void add(const Ellipsoid& e, int a, int b, const RowOfEight& q2) {
+        const RowOfEight t = (1.f - q2).max(0.f), w = t * t * t;
         const Vec3 c = e.centre - m_lo;  // small numbers: float keeps them to a micrometre
         const int row = a * 64 + b * 8;
         Eigen::Map<RowOfEight>(m_w + row) += w;
@@ -384,9 +406,9 @@ public:
     void start(const Vec3&) { std::fill(m_nearest2, m_nearest2 + 512, std::numeric_limits<float>::infinity()); }
     // Only the nearest centre's squared distance (in supports): the distance grows with it, so its square root is
     // taken once per point, in value(), instead of once per sphere.
-    void add(const Ellipsoid&, int a, int b, const RowOfEight& px, const RowOfEight& py, const RowOfEight& pz) {
+    void add(const Ellipsoid&, int a, int b, const RowOfEight& q2) {
         Eigen::Map<RowOfEight> row(m_nearest2 + a * 64 + b * 8);
-        row = row.min(px * px + py * py + pz * pz);
+        row = row.min(q2);
     }
     float value(int n) const { return distance(m_nearest2[n]); }
     bool orderFree() const { return true; }  // a minimum: any order gives the same values
@@ -396,7 +418,9 @@ public:
     }
 
 private:
-    float distance(float nearest2) const { return std::min(m_far, std::sqrt(nearest2) * m_support - m_radius); }
+    float distance(float nearest2) const {
+        return std::min(m_far, std::sqrt(std::max(nearest2, 0.f)) * m_support - m_radius);
+    }
 
     float m_support, m_radius, m_far, m_settleBelow;
     alignas(32) float m_nearest2[512];
