@@ -21,6 +21,7 @@
 #include <openvdb/tools/SignedFloodFill.h>
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
@@ -430,15 +431,18 @@ private:
 std::vector<LatticeLeaf> leavesReached(const KernelBins& binned) {
     const UniformGrid& bins = binned.grid;
     const int around = int(std::ceil(binned.reach.maxCoeff() / (8 * binned.h)));
-    std::vector<openvdb::Coord> origins;
-    for (std::size_t c = 0; c < bins.cellCount(); ++c) {
-        const auto& k = bins.cellCoords(c);
-        for (int a = -around; a <= around; ++a)
-            for (int b = -around; b <= around; ++b)
-                for (int d = -around; d <= around; ++d)
-                    origins.emplace_back(8 * (k[0] + a), 8 * (k[1] + b), 8 * (k[2] + d));
-    }
-    std::sort(origins.begin(), origins.end());
+    const std::size_t side = std::size_t(2 * around + 1), perCell = side * side * side;
+    std::vector<openvdb::Coord> origins(bins.cellCount() * perCell);
+    forEachBlock(bins.cellCount(), [&](std::size_t begin, std::size_t end) {
+        for (std::size_t c = begin; c != end; ++c) {
+            const auto& k = bins.cellCoords(c);
+            openvdb::Coord* out = origins.data() + c * perCell;
+            for (int a = -around; a <= around; ++a)
+                for (int b = -around; b <= around; ++b)
+                    for (int d = -around; d <= around; ++d) *out++ = {8 * (k[0] + a), 8 * (k[1] + b), 8 * (k[2] + d)};
+        }
+    });
+    tbb::parallel_sort(origins.begin(), origins.end());
     origins.erase(std::unique(origins.begin(), origins.end()), origins.end());
     std::vector<LatticeLeaf> out;
     out.reserve(origins.size());
