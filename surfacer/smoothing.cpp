@@ -110,7 +110,6 @@ namespace {
 
 // Eight voxels along z, one SIMD vector.
 using RowOfEight = Eigen::Array<float, 8, 1>;
-using RowOfEightD = Eigen::Array<double, 8, 1>;
 
 // A row of eight values of the neighbourhood, offset from row (i, j) by (a, b) and along z by c (-1..1).
 struct Rows {
@@ -259,22 +258,22 @@ private:
 };
 
 // phi + dt H |grad phi| with dt = dx^2 / 3 and H the mean curvature (half the divergence of the normal); central
-// differences, unscaled by dx (the dx^2 of dt cancels theirs); in double.
+// differences, unscaled by dx (the dx^2 of dt cancels theirs); in single precision, as the values are kept (in double
+// it cost a sixth more of the smoothing at 1M particles, and the quality tests' figures are the same in either).
 RowOfEight curvatureStep(const Rows& p) {
-    auto at = [&](int a, int b, int c) -> RowOfEightD { return p(a, b, c).cast<double>(); };
-    const RowOfEightD phi = at(0, 0, 0);
-    const RowOfEightD dx = 0.5 * (at(1, 0, 0) - at(-1, 0, 0)), dy = 0.5 * (at(0, 1, 0) - at(0, -1, 0)),
-                      dz = 0.5 * (at(0, 0, 1) - at(0, 0, -1));
-    const RowOfEightD gradient2 = dx * dx + dy * dy + dz * dz;
-    const RowOfEightD dxx = at(1, 0, 0) - 2 * phi + at(-1, 0, 0), dyy = at(0, 1, 0) - 2 * phi + at(0, -1, 0),
-                      dzz = at(0, 0, 1) - 2 * phi + at(0, 0, -1);
-    const RowOfEightD dxy = 0.25 * (at(1, 1, 0) - at(1, -1, 0) - at(-1, 1, 0) + at(-1, -1, 0));
-    const RowOfEightD dxz = 0.25 * (at(1, 0, 1) - at(1, 0, -1) - at(-1, 0, 1) + at(-1, 0, -1));
-    const RowOfEightD dyz = 0.25 * (at(0, 1, 1) - at(0, 1, -1) - at(0, -1, 1) + at(0, -1, -1));
-    const RowOfEightD alpha = dx * dx * (dyy + dzz) + dy * dy * (dxx + dzz) + dz * dz * (dxx + dyy) -
-                              2 * (dx * (dy * dxy + dz * dxz) + dy * dz * dyz);
+    const RowOfEight phi = p(0, 0, 0);
+    const RowOfEight dx = 0.5f * (p(1, 0, 0) - p(-1, 0, 0)), dy = 0.5f * (p(0, 1, 0) - p(0, -1, 0)),
+                     dz = 0.5f * (p(0, 0, 1) - p(0, 0, -1));
+    const RowOfEight gradient2 = dx * dx + dy * dy + dz * dz;
+    const RowOfEight dxx = p(1, 0, 0) - 2.f * phi + p(-1, 0, 0), dyy = p(0, 1, 0) - 2.f * phi + p(0, -1, 0),
+                     dzz = p(0, 0, 1) - 2.f * phi + p(0, 0, -1);
+    const RowOfEight dxy = 0.25f * (p(1, 1, 0) - p(1, -1, 0) - p(-1, 1, 0) + p(-1, -1, 0));
+    const RowOfEight dxz = 0.25f * (p(1, 0, 1) - p(1, 0, -1) - p(-1, 0, 1) + p(-1, 0, -1));
+    const RowOfEight dyz = 0.25f * (p(0, 1, 1) - p(0, 1, -1) - p(0, -1, 1) + p(0, -1, -1));
+    const RowOfEight alpha = dx * dx * (dyy + dzz) + dy * dy * (dxx + dzz) + dz * dz * (dxx + dyy) -
+                             2.f * (dx * (dy * dxy + dz * dxz) + dy * dz * dyz);
     // Every term of alpha holds a first difference: where the gradient vanishes, so does the step.
-    return (phi + alpha / (6 * gradient2.max(1e-30))).cast<float>();
+    return phi + alpha / (6.f * gradient2.max(1e-30f));
 }
 
 // One explicit step of phi_t = S(phi) (1 - |grad phi|) with the time step 0.3 dx: the values move towards distances
