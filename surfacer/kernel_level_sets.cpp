@@ -272,13 +272,13 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                         const RowOfEight pdy = 2.f * (p[0] * dy[0] + p[1] * dy[1] + p[2] * dy[2]);
                         const auto row = [&](int b) {
                             if (!rowBricks(target.bricks, a, b)) return;
-                            float u[3];
-                            for (int d = 0; d < 3; ++d) u[d] = ua[d] + float(b) * dy[d];
                             // Rows that miss the ellipsoid (|u + c dz| < 1 for no c, a quadratic's roots)
                             // are skipped where adding them would change the field. Where it would not,
                             // the test costs more than the rows it saves (a quarter more rows evaluated,
                             // but the branch is mispredicted, and without it two rows' work overlaps).
                             if constexpr (!Field::kNothingOutside) {
+                                float u[3];
+                                for (int d = 0; d < 3; ++d) u[d] = ua[d] + float(b) * dy[d];
                                 const float middle = (u[0] * dz[0] + u[1] * dz[1] + u[2] * dz[2]) * inverseStep;
                                 const float discriminant = middle * middle - (u[0] * u[0] + u[1] * u[1] +
                                                                               u[2] * u[2] - 1) * inverseStep;
