@@ -84,6 +84,7 @@ Mat3 shapeFromSpread(const Mat3& covariance) {
 // taken in one pass over the 27 grid cells around the particle's own, without storing neighbour lists (which cost
 // as much again as the sums at 1M particles). The 27 cells' points are gathered once for the particles of a cell and
 // tested 64 at a time, so that only the neighbours are visited (a branch per candidate went the wrong way often).
+// The kernels come out in the grid's order, not the particles'.
 std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     const Real support = kKernelSupport * r, support2 = support * support, inverseCube = 1 / (support2 * support);
     // The test lets through at least every candidate within the support (it may round differently from the sums'
@@ -125,7 +126,8 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                         q[3] += weight * dx * dy, q[4] += weight * dx * dz, q[5] += weight * dy * dz;
                     }
                 }
-                Ellipsoid& e = out[i];
+                // In the grid's Z order, not the particles': the sums' bins then find a cell's kernels side by side.
+                Ellipsoid& e = out[s];
                 e.centre = x[i];
                 Mat3 shape = Mat3::Identity();
                 if (neighbours >= kMinNeighbours) {
