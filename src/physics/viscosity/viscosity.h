@@ -62,7 +62,7 @@ public:
     Real scale() const { return m_scale; }
     Real shape(Real d2) const {
         const Real u = d2 * m_inverseSpacing2 - 1;
-        return m_reshaped ? 1 + u * (kShapeLinear + u * kShapeQuadratic) : Real(1);
+        return 1 + u * (linear() + u * quadratic());  // the sweeps take the same coefficients
     }
     Real inverseSpacing2() const { return m_inverseSpacing2; }
     /// The shape's coefficients: 0 for the paper's weights.
