@@ -16,6 +16,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
+#include <immintrin.h>
 #include <openvdb/tools/Morphology.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/SignedFloodFill.h>
@@ -154,21 +155,35 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
 using RowOfEight = Eigen::Array<float, 8, 1>;
 const RowOfEight kRowSteps = RowOfEight::LinSpaced(8, 0, 7);
 
+// a b + c, rounded once where the target has FMA (the build leaves no product to the compiler to fuse, so that the
+// same code rounds the same way wherever it is inlined; here it is asked for by name).
+inline RowOfEight fusedMultiplyAdd(const RowOfEight& a, const RowOfEight& b, const RowOfEight& c) {
+#if defined(__FMA__) && defined(__AVX__)
+    RowOfEight out;
+    _mm256_storeu_ps(out.data(),
+                     _mm256_fmadd_ps(_mm256_loadu_ps(a.data()), _mm256_loadu_ps(b.data()), _mm256_loadu_ps(c.data())));
+    return out;
+#else
+    return a * b + c;
+#endif
+}
+
 // The kernel's profile over s = q^2 (q = distance / support): (1 - s)^3 (1 + a s + b s^2), the cubic spline's
 // profile fitted by least squares weighted by q^2 (as volume is). It stays within 0.007 of the spline (peak 1) and
 // vanishes at the support with two derivatives, as the spline does, but a row's points need no square root: the two
 // kernel sums cost about a fifth less at 1M particles than with the spline itself (docs/benchmarks.md, change 11).
 constexpr float kShapeA = -2.0484819f, kShapeB = 1.6913138f;
-template <class T>
-T shapeFactor(const T& s) {  // 1 + a s + b s^2, for a row or a number
-    return 1.f + s * (kShapeA + s * kShapeB);
-}
-inline RowOfEight kernelShape(const RowOfEight& s) {
+Real shapeFactor(Real s) { return 1.f + s * (kShapeA + s * kShapeB); }  // 1 + a s + b s^2
+// sum + the profile at a row's s, with fused products.
+inline RowOfEight addKernelShape(const RowOfEight& sum, const RowOfEight& s) {
     const RowOfEight t = (1.f - s).max(0.f);
-    return t * t * t * shapeFactor(s);
+    const RowOfEight factor = fusedMultiplyAdd(s, fusedMultiplyAdd(s, RowOfEight::Constant(kShapeB),
+                                                                   RowOfEight::Constant(kShapeA)),
+                                               RowOfEight::Ones());
+    return fusedMultiplyAdd(t * t * t, factor, sum);
 }
 
-// The sum of kernelShape (in double) at a point of a lattice of spacing 2r, support 4r (the points within two
+// The sum of the profile (in double) at a point of a lattice of spacing 2r, support 4r (the points within two
 // spacings).
 Real latticeShapeSum() {
     Real sum = 0;
@@ -187,12 +202,17 @@ struct LatticeLeaf {
     std::uint64_t bricks;
 };
 
-// The kernels' centres sorted into cells of one leaf of a lattice of spacing h (8 h), and how far the largest
-// kernel reaches from its centre along each axis.
+// The kernels' centres sorted into cells of one leaf of a lattice of spacing h (8 h), how far the largest kernel
+// reaches from its centre along each axis, and per cell the box that holds its kernels' boxes (so that a leaf skips
+// the cells none of whose kernels reach it: most of those two cells away, where only stretched kernels could).
 struct KernelBins {
+    struct Box {
+        Vec3 lo, hi;
+    };
     Real h;
     UniformGrid grid;
     Vec3 reach = Vec3::Zero();
+    std::vector<Box> boxes;  // per cell
 
     KernelBins(const std::vector<Ellipsoid>& kernels, Real spacing) : h(spacing), grid(8 * spacing) {
         std::vector<Vec3> centres(kernels.size());
@@ -200,6 +220,20 @@ struct KernelBins {
             reach = reach.cwiseMax(kernels[i].extent.cast<Real>()), centres[i] = kernels[i].centre;
         grid.build(centres);
         grid.releaseWorkingMemory();
+        boxes.resize(grid.cellCount());
+        forEachBlock(grid.cellCount(), [&](std::size_t begin, std::size_t end) {
+            for (std::size_t c = begin; c != end; ++c) {
+                Box box{Vec3::Constant(std::numeric_limits<Real>::infinity()),
+                        Vec3::Constant(-std::numeric_limits<Real>::infinity())};
+                for (std::size_t k = grid.cellBegin(c); k < grid.cellBegin(c + 1); ++k) {
+                    const Ellipsoid& e = kernels[grid.sortedIndices()[k]];
+                    // As the leaves' test computes them, so that a cell is skipped only where each kernel would be.
+                    const Vec3 extent = e.extent.cast<Real>();
+                    box.lo = box.lo.cwiseMin(e.centre - extent), box.hi = box.hi.cwiseMax(e.centre + extent);
+                }
+                boxes[c] = box;
+            }
+        }, 256);
     }
 };
 
@@ -239,6 +273,10 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                 const std::int64_t found = bins.findCell(ca, cb, cc);
                 if (found < 0) return;
                 const std::size_t ci = std::size_t(found);
+                const KernelBins::Box& box = binned.boxes[ci];
+                if ((((box.lo - lo) * inverseH).array().ceil() > 7).any() ||
+                    (((box.hi - lo) * inverseH).array().floor() < 0).any())
+                    return;
                 for (std::size_t k = bins.cellBegin(ci); k < bins.cellBegin(ci + 1); ++k) {
                     const Ellipsoid& e = kernels[bins.sortedIndices()[k]];
                     // The kernel's box in the leaf's point indices (0..7).
@@ -269,9 +307,13 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                         // A row at once (one vector), at the row's points p + b dy with p = ua + c dz, c = 0..7:
                         // |p + b dy|^2 = |p|^2 + b (2 p.dy + b |dy|^2), the slab's two vectors taken once for its rows.
                         RowOfEight p[3];
-                        for (int d = 0; d < 3; ++d) p[d] = ua[d] + kRowSteps * dz[d];
-                        const RowOfEight pp = p[0] * p[0] + p[1] * p[1] + p[2] * p[2];
-                        const RowOfEight pdy = 2.f * (p[0] * dy[0] + p[1] * dy[1] + p[2] * dy[2]);
+                        for (int d = 0; d < 3; ++d)
+                            p[d] = fusedMultiplyAdd(kRowSteps, RowOfEight::Constant(dz[d]),
+                                                    RowOfEight::Constant(ua[d]));
+                        const RowOfEight pp = fusedMultiplyAdd(p[2], p[2], fusedMultiplyAdd(p[1], p[1], p[0] * p[0]));
+                        const RowOfEight pdy =
+                            2.f * fusedMultiplyAdd(p[2], RowOfEight::Constant(dy[2]),
+                                                   fusedMultiplyAdd(p[1], RowOfEight::Constant(dy[1]), p[0] * dy[0]));
                         const auto row = [&](int b) {
                             if (!rowBricks(target.bricks, a, b)) return;
                             // Rows that miss the ellipsoid (|u + c dz| < 1 for no c, a quadratic's roots)
@@ -287,7 +329,7 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                                 if (discriminant <= 0) return;
                             }
                             const RowOfEight fb = RowOfEight::Constant(float(b));
-                            field.add(e, a, b, pp + fb * (pdy + fb * dy2));
+                            field.add(e, a, b, fusedMultiplyAdd(fb, fusedMultiplyAdd(fb, dy2, pdy), pp));
                         };
 #pragma GCC unroll 2
                         for (int b = bLo; b <= bHi; ++b) row(b);
@@ -295,19 +337,23 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                 }
             };
             const auto visitAll = [&] {
-                // The leaf's own cell first where the order is free: its kernels cover most of the leaf.
                 const std::int64_t own[3] = {std::int64_t(std::floor(lo.x() / cell)),
                                              std::int64_t(std::floor(lo.y() / cell)),
                                              std::int64_t(std::floor(lo.z() / cell))};
-                const bool ownFirst = field.orderFree();
-                if (ownFirst) visit(own[0], own[1], own[2]);
-                for (std::int64_t ca = std::int64_t(cellLo.x()); ca <= std::int64_t(cellHi.x()); ++ca)
-                    for (std::int64_t cb = std::int64_t(cellLo.y()); cb <= std::int64_t(cellHi.y()); ++cb)
-                        for (std::int64_t cc = std::int64_t(cellLo.z()); cc <= std::int64_t(cellHi.z()); ++cc) {
-                            if (field.settled()) return;
-                            if (ownFirst && ca == own[0] && cb == own[1] && cc == own[2]) continue;
-                            visit(ca, cb, cc);
-                        }
+                // Where the order is free, the cells nearest the leaf's own first (by their distance in cells
+                // summed over the axes, up to 3): their kernels cover most of the leaf, so an inside leaf settles
+                // sooner. Else one pass in the grid's order.
+                const int rings = field.orderFree() ? 4 : 1;
+                for (int ring = 0; ring < rings; ++ring)
+                    for (std::int64_t ca = std::int64_t(cellLo.x()); ca <= std::int64_t(cellHi.x()); ++ca)
+                        for (std::int64_t cb = std::int64_t(cellLo.y()); cb <= std::int64_t(cellHi.y()); ++cb)
+                            for (std::int64_t cc = std::int64_t(cellLo.z()); cc <= std::int64_t(cellHi.z()); ++cc) {
+                                const std::int64_t away =
+                                    std::abs(ca - own[0]) + std::abs(cb - own[1]) + std::abs(cc - own[2]);
+                                if (rings > 1 && std::min<std::int64_t>(away, rings - 1) != ring) continue;
+                                if (field.settled()) return;
+                                visit(ca, cb, cc);
+                            }
             };
             visitAll();
             auto* leaf = new FloatLeaf(o, background, false);
@@ -326,7 +372,7 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
     return grid;
 }
 
-// Yu & Turk's field: iso minus the kernels' sum (kernelShape, scaled to the cubic spline's peak), each particle
+// Yu & Turk's field: iso minus the kernels' sum (the profile, scaled to the cubic spline's peak), each particle
 // weighing one lattice cell (2r)^3. With settleBelow, only how the values lie against it and other such thresholds is
 // asked for: the order of the kernels, which moves a sum's last bits, is free, and since the sums only grow (the shape
 // is never negative), a leaf whose values all lie at or below settleBelow has settled.
@@ -337,7 +383,8 @@ public:
         : m_scale(scale), m_iso(iso), m_settleBelow(settleBelow) {}
     void start(const Vec3&) { std::fill(m_sum, m_sum + 512, 0.f); }
     void add(const Ellipsoid&, int a, int b, const RowOfEight& q2) {
-        Eigen::Map<RowOfEight>(m_sum + a * 64 + b * 8) += kernelShape(q2);
+        Eigen::Map<RowOfEight> row(m_sum + a * 64 + b * 8);
+        row = addKernelShape(row, q2);
     }
     float value(int n) const { return valueOf(m_sum[n]); }
     bool orderFree() const { return m_settleBelow > -std::numeric_limits<float>::infinity(); }
@@ -378,9 +425,10 @@ public:
         const Vec3 c = e.centre - m_lo;  // small numbers: float keeps them to a micrometre
         const int row = a * 64 + b * 8;
         Eigen::Map<RowOfEight>(m_w + row) += w;
-        Eigen::Map<RowOfEight>(m_x + row) += w * float(c.x());
-        Eigen::Map<RowOfEight>(m_y + row) += w * float(c.y());
-        Eigen::Map<RowOfEight>(m_z + row) += w * float(c.z());
+        for (auto [channel, coordinate] : {std::pair{m_x, c.x()}, {m_y, c.y()}, {m_z, c.z()}}) {
+            Eigen::Map<RowOfEight> sum(channel + row);
+            sum = fusedMultiplyAdd(w, RowOfEight::Constant(float(coordinate)), sum);
+        }
     }
     float value(int n) const {
         if (!(m_w[n] > 0)) return m_far;
