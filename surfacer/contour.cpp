@@ -628,7 +628,25 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     }, 16);
     vertices = {};
 
-    // Faces: each crossed edge starting at a leaf's voxel joins the four cells around it.
+    // Faces: each crossed edge starting at a leaf's voxel joins the four cells around it. Per axis a of the edge,
+    // the four cells' offsets from the edge's first voxel, counter-clockwise seen from +a, and where the edge lies in
+    // each (as constants: offsets written into an array per edge stalled the loads that read it back).
+    struct AroundEdge {
+        int offset[4][3];
+        int edge[4];
+    };
+    static constexpr auto kAround = [] {
+        std::array<AroundEdge, 3> out{};
+        const int uv[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
+        for (int a = 0; a < 3; ++a)
+            for (int n = 0; n < 4; ++n) {
+                out[a].offset[n][(a + 1) % 3] = -uv[n][0];
+                out[a].offset[n][(a + 2) % 3] = -uv[n][1];
+                out[a].edge[n] = 4 * a + uv[n][0] + 2 * uv[n][1];
+            }
+        return out;
+    }();
+    const bool anyFlipped = !flipped.empty();
     std::vector<std::vector<std::array<std::uint32_t, 3>>> faces(leaves.size());
     forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
         IdNeighbourhood id(ids);
@@ -645,18 +663,17 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
                         const bool inside = own & 1;
                         for (int a = 0; a < 3; ++a) {
                             if (bool(own >> (1 << a) & 1) == inside) continue;
-                            const int b = (a + 1) % 3, c = (a + 2) % 3;
-                            // The four cells, counter-clockwise seen from +a, and where the edge lies in each.
-                            const int around[4][2] = {{0, 0}, {1, 0}, {1, 1}, {0, 1}};
                             std::uint32_t vertex[4];
                             for (int n = 0; n < 4; ++n) {
-                                int q[3] = {i, j, k};
-                                q[b] -= around[n][0], q[c] -= around[n][1];
-                                const CellPieces pieces(configs(q[0], q[1], q[2]), flipped,
-                                                        leaves[l]->origin().offsetBy(q[0], q[1], q[2]));
-                                const int edge = 4 * a + around[n][0] + 2 * around[n][1];
-                                const int piece = pieces.pieces->piece[std::size_t(edge)];
-                                const std::int32_t first = id(q[0], q[1], q[2]);
+                                const int* d = kAround[std::size_t(a)].offset[n];
+                                const int qi = i + d[0], qj = j + d[1], qk = k + d[2];
+                                const int config = configs(qi, qj, qk);
+                                const int edge = kAround[std::size_t(a)].edge[n];
+                                int piece = table[std::size_t(config)].piece[std::size_t(edge)];
+                                if (anyFlipped && table[std::size_t(config)].ambiguous)
+                                    piece = CellPieces(config, flipped, leaves[l]->origin().offsetBy(qi, qj, qk))
+                                                .pieces->piece[std::size_t(edge)];
+                                const std::int32_t first = id(qi, qj, qk);
                                 if (first < 0)  // every crossed cell was given vertices above
                                     throw std::logic_error("mesher: a crossed voxel cell has no vertex");
                                 vertex[n] = std::uint32_t(first + piece);
