@@ -81,16 +81,47 @@ Mat3 shapeFromSpread(const Mat3& covariance) {
     return axes * scale.cwiseInverse().asDiagonal() * axes.transpose();
 }
 
+// Eight candidates' values, one SIMD vector.
+using EightFloats = Eigen::Array<float, 8, 1>;
+
+// The 27 cells' points around one cell of a grid, as offsets from that cell's lowest corner in single precision
+// (small numbers: float keeps them to a nanometre at a centimetre), padded to a multiple of eight with points too
+// far for any kernel, so that the spread's sums take eight at a time without a test per candidate.
+struct NearbyOffsets {
+    CellCandidates candidates;
+    std::vector<float> x, y, z;
+
+    void gather(const UniformGrid& grid, std::size_t cell) {
+        candidates.gather(grid, grid.cellCoords(cell));
+        const std::size_t n = candidates.count, padded = (n + 7) / 8 * 8;
+        x.resize(padded), y.resize(padded), z.resize(padded);
+        const Vec3 corner = corner0(grid, cell);
+        for (std::size_t k = 0; k < n; ++k) {
+            x[k] = float(candidates.x[k] - corner.x());
+            y[k] = float(candidates.y[k] - corner.y());
+            z[k] = float(candidates.z[k] - corner.z());
+        }
+        // Far, yet squares and cubes stay finite: such a point weighs max(0, 1 - huge) = 0, and 0 times it is 0.
+        std::fill(x.begin() + std::ptrdiff_t(n), x.end(), 1e12f);
+        std::fill(y.begin() + std::ptrdiff_t(n), y.end(), 1e12f);
+        std::fill(z.begin() + std::ptrdiff_t(n), z.end(), 1e12f);
+    }
+
+    static Vec3 corner0(const UniformGrid& grid, std::size_t cell) {
+        const auto& c = grid.cellCoords(cell);
+        return Vec3(c[0], c[1], c[2]) * grid.cellSize();
+    }
+};
+
 // Each particle's kernel from the spread of its neighbours within the support. The sums the spread needs are
 // taken in one pass over the 27 grid cells around the particle's own, without storing neighbour lists (which cost
-// as much again as the sums at 1M particles). The 27 cells' points are gathered once for the particles of a cell and
-// tested 64 at a time, so that only the neighbours are visited (a branch per candidate went the wrong way often).
-// The kernels come out in the grid's order, not the particles'.
+// as much again as the sums at 1M particles): the 27 cells' points are gathered once for the particles of a cell,
+// and every particle weighs them eight at a time in single precision, those beyond the support with weight zero (a
+// branch per candidate went the wrong way often). The kernels come out in the grid's order, not the particles'.
 std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
-    const Real support = kKernelSupport * r, support2 = support * support, inverseCube = 1 / (support2 * support);
-    // The test lets through at least every candidate within the support (it may round differently from the sums'
-    // own distance, which decides).
-    const Real candidate2 = support2 * (1 + 1e-12);
+    const Real support = kKernelSupport * r;
+    const Real support2 = support * support;
+    const float inverseCube = float(1 / (support2 * support));
     UniformGrid grid(support);
     grid.build(x);
     grid.releaseWorkingMemory();
@@ -98,44 +129,58 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     const std::vector<Real>& sy = grid.sortedCoords(1);
     const std::vector<Real>& sz = grid.sortedCoords(2);
     std::vector<Ellipsoid> out(x.size());
-    tbb::enumerable_thread_specific<CellCandidates> scratch;
+    tbb::enumerable_thread_specific<NearbyOffsets> scratch;
     forEachBlock(grid.cellCount(), [&](std::size_t begin, std::size_t end) {
-        CellCandidates& cand = scratch.local();
+        NearbyOffsets& near = scratch.local();
         for (std::size_t c = begin; c != end; ++c) {
-            cand.gather(grid, grid.cellCoords(c));
-            const std::size_t words = cand.words();
+            near.gather(grid, c);
+            const Vec3 corner = NearbyOffsets::corner0(grid, c);
             for (std::size_t s = grid.cellBegin(c); s != grid.cellBegin(c + 1); ++s) {
                 const std::uint32_t i = grid.sortedIndices()[s];
-                // Weighted sums over the neighbourhood, itself included, w = 1 - (d / support)^3, of the offsets
-                // from the particle and of their products (the covariance about the weighted mean follows).
-                Real total = 1, m[3] = {0, 0, 0}, q[6] = {0, 0, 0, 0, 0, 0};
+                // Weighted sums over the neighbourhood, itself included (at offset 0, weight 1),
+                // w = max(0, 1 - (d / support)^3), of the offsets from the particle and of their products (the
+                // covariance about the weighted mean follows).
+                const float px = float(sx[s] - corner.x()), py = float(sy[s] - corner.y()),
+                            pz = float(sz[s] - corner.z());
+                EightFloats total = EightFloats::Zero(), m[3], q[6];
+                for (auto& sum : m) sum.setZero();
+                for (auto& sum : q) sum.setZero();
+                // The candidates within the support are found in double, 64 at a time, and counted there: a
+                // lattice's points two spacings apart lie at the support itself, where rounding decides, and the
+                // count decides whether a kernel may stretch. Eights without one are skipped.
                 std::size_t neighbours = 0;
-                for (std::size_t w = 0; w != words; ++w) {
-                    const std::size_t base = 64 * w;
-                    for (std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base,
-                                                       cand.z.data() + base, sx[s], sy[s], sz[s], candidate2);
-                         bits; bits &= bits - 1) {
-                        const std::size_t n = base + std::size_t(__builtin_ctzll(bits));
-                        const Real dx = cand.x[n] - sx[s], dy = cand.y[n] - sy[s], dz = cand.z[n] - sz[s];
-                        const Real d2 = dx * dx + dy * dy + dz * dz;
-                        if (d2 >= support2 || cand.index[n] == i) continue;
-                        const Real weight = 1 - d2 * std::sqrt(d2) * inverseCube;
-                        ++neighbours;
-                        total += weight;
-                        m[0] += weight * dx, m[1] += weight * dy, m[2] += weight * dz;
-                        q[0] += weight * dx * dx, q[1] += weight * dy * dy, q[2] += weight * dz * dz;
-                        q[3] += weight * dx * dy, q[4] += weight * dx * dz, q[5] += weight * dy * dz;
+                const CellCandidates& cand = near.candidates;
+                for (std::size_t word = 0; word != cand.words(); ++word) {
+                    const std::size_t base = 64 * word;
+                    const std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base,
+                                                        cand.z.data() + base, sx[s], sy[s], sz[s], support2);
+                    neighbours += std::size_t(__builtin_popcountll(bits));
+                    for (std::size_t k = base; k != base + 64; k += 8) {
+                        if (!(bits >> (k - base) & 0xffu)) continue;
+                        const EightFloats dx = Eigen::Map<const EightFloats>(near.x.data() + k) - px;
+                        const EightFloats dy = Eigen::Map<const EightFloats>(near.y.data() + k) - py;
+                        const EightFloats dz = Eigen::Map<const EightFloats>(near.z.data() + k) - pz;
+                        const EightFloats d2 = dx * dx + dy * dy + dz * dz;
+                        const EightFloats w = (1.f - d2 * d2.sqrt() * inverseCube).max(0.f);
+                        total += w;
+                        const EightFloats wx = w * dx, wy = w * dy, wz = w * dz;
+                        m[0] += wx, m[1] += wy, m[2] += wz;
+                        q[0] += wx * dx, q[1] += wy * dy, q[2] += wz * dz;
+                        q[3] += wx * dy, q[4] += wx * dz, q[5] += wy * dz;
                     }
                 }
+                const Real weight = total.sum();
+                --neighbours;  // itself
                 // In the grid's Z order, not the particles': the sums' bins then find a cell's kernels side by side.
                 Ellipsoid& e = out[s];
                 e.centre = x[i];
                 Mat3 shape = Mat3::Identity();
                 if (neighbours >= kMinNeighbours) {
-                    const Vec3 mean = Vec3(m[0], m[1], m[2]) / total;
+                    const Vec3 mean = Vec3(m[0].sum(), m[1].sum(), m[2].sum()) / weight;
                     Mat3 covariance;
-                    covariance << q[0], q[3], q[4], q[3], q[1], q[5], q[4], q[5], q[2];
-                    covariance = covariance / total - mean * mean.transpose();
+                    covariance << q[0].sum(), q[3].sum(), q[4].sum(), q[3].sum(), q[1].sum(), q[5].sum(), q[4].sum(),
+                        q[5].sum(), q[2].sum();
+                    covariance = covariance / weight - mean * mean.transpose();
                     shape = shapeFromSpread(covariance);
                 }
                 // The ellipsoid {y : |A y| < support} = A^-1 (ball); its box's half size along axis k is
