@@ -302,6 +302,7 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                           const std::vector<LatticeLeaf>& targets, Real support, float background,
                           const Field& prototype) {
     const Real h = binned.h, cell = 8 * h, inverseH = 1 / h;
+    const float stepInSupports = float(h / support);
     const Vec3& reach = binned.reach;
     const UniformGrid& bins = binned.grid;
     std::vector<FloatLeaf*> made(targets.size(), nullptr);
@@ -333,17 +334,17 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                     if ((boxLo.array() > 7).any() || (boxHi.array() < 0).any()) continue;
                     const int aLo = std::max(0, int(boxLo.x())), aHi = std::min(7, int(boxHi.x()));
                     const int bLo = std::max(0, int(boxLo.y())), bHi = std::min(7, int(boxHi.y()));
-                    // A y in supports at point (a, b, c) of the leaf: u0 + a dx + b dy + c dz.
-                    const Mat3 shape = e.shape.cast<Real>();
-                    const Mat3 m = shape * (h / support);
-                    const Vec3 offset = lo - e.centre;
-                    float u0[3];
-                    for (int d = 0; d < 3; ++d)  // (shape offset) / support, written out: Eigen called a function here
-                        u0[d] = float((shape(d, 0) * offset.x() + shape(d, 1) * offset.y() + shape(d, 2) * offset.z()) /
-                                      support);
-                    const float dx[3] = {float(m(0, 0)), float(m(1, 0)), float(m(2, 0))};
-                    const float dy[3] = {float(m(0, 1)), float(m(1, 1)), float(m(2, 1))};
-                    const float dz[3] = {float(m(0, 2)), float(m(1, 2)), float(m(2, 2))};
+                    // A y in supports at point (a, b, c) of the leaf: u0 + a dx + b dy + c dz, with (dx dy dz) =
+                    // A h / support and u0 = A (lo - centre) / support, in single precision as the rows are.
+                    const float steps[3] = {float((lo.x() - e.centre.x()) * inverseH),
+                                            float((lo.y() - e.centre.y()) * inverseH),
+                                            float((lo.z() - e.centre.z()) * inverseH)};
+                    float u0[3], dx[3], dy[3], dz[3];
+                    for (int d = 0; d < 3; ++d) {  // written out: Eigen called functions here
+                        dx[d] = e.shape(d, 0) * stepInSupports, dy[d] = e.shape(d, 1) * stepInSupports,
+                        dz[d] = e.shape(d, 2) * stepInSupports;
+                        u0[d] = dx[d] * steps[0] + dy[d] * steps[1] + dz[d] * steps[2];
+                    }
                     const float inverseStep = 1.f / (dz[0] * dz[0] + dz[1] * dz[1] + dz[2] * dz[2]);
                     const RowOfEight dy2 = RowOfEight::Constant(dy[0] * dy[0] + dy[1] * dy[1] + dy[2] * dy[2]);
                     for (int a = aLo; a <= aHi; ++a) {
