@@ -251,8 +251,8 @@ struct LatticeLeaf {
 // reaches from its centre along each axis, and per cell the box that holds its kernels' boxes (so that a leaf skips
 // the cells none of whose kernels reach it: most of those two cells away, where only stretched kernels could).
 struct KernelBins {
-    struct Box {
-        Vec3 lo, hi;
+    struct Box {  // in single precision, rounded outwards
+        Eigen::Vector3f lo, hi;
     };
     Real h;
     UniformGrid grid;
@@ -268,15 +268,17 @@ struct KernelBins {
         boxes.resize(grid.cellCount());
         forEachBlock(grid.cellCount(), [&](std::size_t begin, std::size_t end) {
             for (std::size_t c = begin; c != end; ++c) {
-                Box box{Vec3::Constant(std::numeric_limits<Real>::infinity()),
-                        Vec3::Constant(-std::numeric_limits<Real>::infinity())};
+                Vec3 lo = Vec3::Constant(std::numeric_limits<Real>::infinity()), hi = -lo;
                 for (std::size_t k = grid.cellBegin(c); k < grid.cellBegin(c + 1); ++k) {
                     const Ellipsoid& e = kernels[grid.sortedIndices()[k]];
                     // As the leaves' test computes them, so that a cell is skipped only where each kernel would be.
                     const Vec3 extent = e.extent.cast<Real>();
-                    box.lo = box.lo.cwiseMin(e.centre - extent), box.hi = box.hi.cwiseMax(e.centre + extent);
+                    lo = lo.cwiseMin(e.centre - extent), hi = hi.cwiseMax(e.centre + extent);
                 }
-                boxes[c] = box;
+                for (int axis = 0; axis < 3; ++axis) {
+                    boxes[c].lo[axis] = std::nextafter(float(lo[axis]), -std::numeric_limits<float>::infinity());
+                    boxes[c].hi[axis] = std::nextafter(float(hi[axis]), std::numeric_limits<float>::infinity());
+                }
             }
         }, 256);
     }
@@ -320,8 +322,8 @@ FloatGrid::Ptr gatherRows(const std::vector<Ellipsoid>& kernels, const KernelBin
                 if (found < 0) return;
                 const std::size_t ci = std::size_t(found);
                 const KernelBins::Box& box = binned.boxes[ci];
-                if ((((box.lo - lo) * inverseH).array().ceil() > 7).any() ||
-                    (((box.hi - lo) * inverseH).array().floor() < 0).any())
+                if ((((box.lo.cast<Real>() - lo) * inverseH).array().ceil() > 7).any() ||
+                    (((box.hi.cast<Real>() - lo) * inverseH).array().floor() < 0).any())
                     return;
                 for (std::size_t k = bins.cellBegin(ci); k < bins.cellBegin(ci + 1); ++k) {
                     const Ellipsoid& e = kernels[bins.sortedIndices()[k]];
