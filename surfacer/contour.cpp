@@ -262,25 +262,31 @@ struct Cell {
 };
 
 // The inside configurations of the cells whose first corner lies in -1..7 around a leaf, from one pass over its
-// neighbourhood's signs.
+// neighbourhood's signs: each row's signs as bits, the four rows around a line of cells interleaved so that a cell's
+// eight corners are eight bits in a row (corner n = x | y << 1 | z << 2 is bit 4 z + n of the cell's nibble pair).
 struct Configs {
     std::uint8_t at[9][9][9];
 
     explicit Configs(const Values& values) {
-        std::uint8_t inside[10][10][10];
+        std::uint64_t spread[10][10];  // bit 4 k: row (i, j)'s point k inside
         for (int i = -1; i <= 8; ++i)
             for (int j = -1; j <= 8; ++j) {
                 const float* row = values.at.row(i, j);
-                for (int k = 0; k < 10; ++k) inside[i + 1][j + 1][k] = row[k] < 0;
+                std::uint64_t bits = 0;
+                for (int k = 0; k < 10; ++k) bits |= std::uint64_t(row[k] < 0) << k;
+                // Every bit to four times its place (a Morton code's spreading for four dimensions).
+                bits = (bits ^ (bits << 24)) & 0x000000FF000000FFull;
+                bits = (bits ^ (bits << 12)) & 0x000F000F000F000Full;
+                bits = (bits ^ (bits << 6)) & 0x0303030303030303ull;
+                bits = (bits ^ (bits << 3)) & 0x1111111111111111ull;
+                spread[i + 1][j + 1] = bits;
             }
         for (int i = 0; i < 9; ++i)
-            for (int j = 0; j < 9; ++j)
-                for (int k = 0; k < 9; ++k) {
-                    int config = 0;
-                    for (int n = 0; n < 8; ++n)
-                        config |= inside[i + cornerOffset(n, 0)][j + cornerOffset(n, 1)][k + cornerOffset(n, 2)] << n;
-                    at[i][j][k] = std::uint8_t(config);
-                }
+            for (int j = 0; j < 9; ++j) {
+                const std::uint64_t corners = spread[i][j] | spread[i + 1][j] << 1 | spread[i][j + 1] << 2 |
+                                              spread[i + 1][j + 1] << 3;
+                for (int k = 0; k < 9; ++k) at[i][j][k] = std::uint8_t(corners >> 4 * k);
+            }
     }
 
     int operator()(int i, int j, int k) const { return at[i + 1][j + 1][k + 1]; }
