@@ -662,6 +662,41 @@ void fieldToDistance(FloatGrid& field, Real voxel, Real halfBand) {
             float* out = leaves.getBuffer(l, 1).data();
             const float* in = leaf.buffer().data();
             for (int n = 0; n < 512; ++n) out[n] = in[n] < 0 ? -band : band;
+#if defined(__AVX2__)
+            // The same arithmetic as below, a row of eight at a time (the compiler left the loop scalar).
+            const __m256 two = _mm256_set1_ps(2.f), halfStep = _mm256_set1_ps(inv2h), zero = _mm256_setzero_ps();
+            const __m256 upper = _mm256_set1_ps(band), lower = _mm256_set1_ps(-band);
+            const __m256i lanes = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+            for (int i = 0; i < 8; ++i)
+                for (int j = 0; j < 8; ++j) {
+                    const int active = leaf.getValueMask().getWord<std::uint8_t>(openvdb::Index(8 * i + j));
+                    if (!active) continue;
+                    const __m256 here = _mm256_loadu_ps(in + 64 * i + 8 * j);
+                    const auto derivative = [&](const float* upRow, const float* downRow) {
+                        const __m256 up = _mm256_loadu_ps(upRow), down = _mm256_loadu_ps(downRow);
+                        const __m256 hasUp = _mm256_cmp_ps(up, up, _CMP_ORD_Q);
+                        const __m256 hasDown = _mm256_cmp_ps(down, down, _CMP_ORD_Q);
+                        const __m256 central = _mm256_mul_ps(_mm256_sub_ps(up, down), halfStep);
+                        const __m256 forward = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(up, here), two), halfStep);
+                        const __m256 backward = _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(here, down), two), halfStep);
+                        const __m256 oneSided = _mm256_blendv_ps(_mm256_and_ps(hasDown, backward), forward, hasUp);
+                        return _mm256_blendv_ps(oneSided, central, _mm256_and_ps(hasUp, hasDown));
+                    };
+                    const __m256 dx = derivative(g.row(i + 1, j) + 1, g.row(i - 1, j) + 1);
+                    const __m256 dy = derivative(g.row(i, j + 1) + 1, g.row(i, j - 1) + 1);
+                    const __m256 dz = derivative(g.row(i, j) + 2, g.row(i, j));
+                    const __m256 gradient2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                                                           _mm256_mul_ps(dz, dz));
+                    const __m256 outside = _mm256_blendv_ps(upper, lower, _mm256_cmp_ps(here, zero, _CMP_LT_OQ));
+                    __m256 distance = _mm256_blendv_ps(outside, _mm256_div_ps(here, _mm256_sqrt_ps(gradient2)),
+                                                       _mm256_cmp_ps(gradient2, zero, _CMP_GT_OQ));
+                    distance = _mm256_min_ps(_mm256_max_ps(distance, lower), upper);
+                    const __m256 on = _mm256_castsi256_ps(
+                        _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(active), lanes), lanes));
+                    float* to = out + 64 * i + 8 * j;
+                    _mm256_storeu_ps(to, _mm256_blendv_ps(_mm256_loadu_ps(to), distance, on));
+                }
+#else
             for (auto it = leaf.cbeginValueOn(); it; ++it) {
                 const openvdb::Index n = it.pos();
                 const int i = int(n >> 6), j = int((n >> 3) & 7), k = int(n & 7);
@@ -681,6 +716,7 @@ void fieldToDistance(FloatGrid& field, Real voxel, Real halfBand) {
                 const float distance = gradient2 > 0 ? here / std::sqrt(gradient2) : (here < 0 ? -band : band);
                 out[n] = std::clamp(distance, -band, band);
             }
+#endif
         }
     }, 16);
     leaves.swapLeafBuffer(1);
