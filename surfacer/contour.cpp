@@ -486,13 +486,13 @@ struct IdNeighbourhood {
             for (int b = 0; b < 2; ++b)
                 for (int c = 0; c < 2; ++c) {
                     const IdLeaf* leaf = tree.probeConstLeaf(origin.offsetBy(-8 * (1 - a), -8 * (1 - b), -8 * (1 - c)));
+                    const std::int32_t* values = leaf ? leaf->buffer().data() : nullptr;  // its check once, not per id
                     const int i0 = a ? 0 : -1, i1 = a ? 7 : -1, j0 = b ? 0 : -1, j1 = b ? 7 : -1, k0 = c ? 0 : -1,
                               k1 = c ? 7 : -1;
                     for (int i = i0; i <= i1; ++i)
                         for (int j = j0; j <= j1; ++j)
                             for (int k = k0; k <= k1; ++k)
-                                ids[i + 1][j + 1][k + 1] =
-                                    leaf ? leaf->getValue(openvdb::Index((i & 7) * 64 + (j & 7) * 8 + (k & 7))) : -1;
+                                ids[i + 1][j + 1][k + 1] = values ? values[(i & 7) * 64 + (j & 7) * 8 + (k & 7)] : -1;
                 }
     }
 
