@@ -95,7 +95,7 @@ struct NearbyOffsets {
         candidates.gather(grid, grid.cellCoords(cell));
         const std::size_t n = candidates.count, padded = (n + 7) / 8 * 8;
         x.resize(padded), y.resize(padded), z.resize(padded);
-        const Vec3 corner = corner0(grid, cell);
+        const Vec3 corner = lowestCorner(grid, cell);
         for (std::size_t k = 0; k < n; ++k) {
             x[k] = float(candidates.x[k] - corner.x());
             y[k] = float(candidates.y[k] - corner.y());
@@ -107,7 +107,7 @@ struct NearbyOffsets {
         std::fill(z.begin() + std::ptrdiff_t(n), z.end(), 1e12f);
     }
 
-    static Vec3 corner0(const UniformGrid& grid, std::size_t cell) {
+    static Vec3 lowestCorner(const UniformGrid& grid, std::size_t cell) {
         const auto& c = grid.cellCoords(cell);
         return Vec3(c[0], c[1], c[2]) * grid.cellSize();
     }
@@ -134,7 +134,7 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
         NearbyOffsets& near = scratch.local();
         for (std::size_t c = begin; c != end; ++c) {
             near.gather(grid, c);
-            const Vec3 corner = NearbyOffsets::corner0(grid, c);
+            const Vec3 corner = NearbyOffsets::lowestCorner(grid, c);
             for (std::size_t s = grid.cellBegin(c); s != grid.cellBegin(c + 1); ++s) {
                 const std::uint32_t i = grid.sortedIndices()[s];
                 // Weighted sums over the neighbourhood, itself included (at offset 0, weight 1),
