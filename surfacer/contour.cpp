@@ -23,6 +23,7 @@
 #include "core/parallel.h"
 
 #include <Eigen/Core>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
@@ -525,7 +526,7 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     std::vector<openvdb::Coord> missing;
     for (const auto& below : missingBelow) missing.insert(missing.end(), below.begin(), below.end());
     missingBelow = {};
-    std::sort(missing.begin(), missing.end());
+    tbb::parallel_sort(missing.begin(), missing.end());
     missing.erase(std::unique(missing.begin(), missing.end()), missing.end());
     // Only where a voxel of the leaves above, next to this tile, lies on the other side of the surface.
     std::vector<std::uint8_t> crossed(missing.size(), 0);
@@ -612,18 +613,16 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
     }
     std::vector<std::size_t> offset(leaves.size() + 1, 0);
     for (std::size_t l = 0; l < leaves.size(); ++l) offset[l + 1] = offset[l] + vertices[l].x.size();
-    IdTree ids(-1);
-    for (std::size_t l = 0; l < leaves.size(); ++l)
-        if (!vertices[l].x.empty()) ids.touchLeaf(leaves[l]->origin());
+    // The id leaves are made and filled in parallel, then added to their tree on one thread.
+    std::vector<std::unique_ptr<IdLeaf>> idLeaves(leaves.size());
     points.resize(offset.back());
     const openvdb::math::Transform& transform = grid.transform();
     forEachBlock(leaves.size(), [&](std::size_t begin, std::size_t end) {
-        openvdb::tree::ValueAccessor<IdTree, false> access(ids);
         for (std::size_t l = begin; l != end; ++l) {
             const LeafVertices& v = vertices[l];
             if (v.x.empty()) continue;
             const openvdb::Coord o = leaves[l]->origin();
-            IdLeaf* leaf = access.probeLeaf(o);
+            IdLeaf* leaf = (idLeaves[l] = std::make_unique<IdLeaf>(o, -1)).get();
             for (const auto& [cell, first] : v.first) leaf->setValueOn(cell, std::int32_t(offset[l]) + first);
             for (std::size_t k = 0; k < v.x.size(); ++k) {
                 const openvdb::Vec3d w = transform.indexToWorld(
@@ -633,6 +632,9 @@ void contourLevelSet(const openvdb::FloatGrid& grid, Real adaptivity, std::vecto
         }
     }, 16);
     vertices = {};
+    IdTree ids(-1);
+    for (auto& leaf : idLeaves)
+        if (leaf) ids.addLeaf(leaf.release());
 
     // Faces: each crossed edge starting at a leaf's voxel joins the four cells around it. Per axis a of the edge,
     // the four cells' offsets from the edge's first voxel, counter-clockwise seen from +a, and where the edge lies in
