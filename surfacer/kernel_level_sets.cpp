@@ -81,9 +81,6 @@ Mat3 shapeFromSpread(const Mat3& covariance) {
     return axes * scale.cwiseInverse().asDiagonal() * axes.transpose();
 }
 
-// Eight candidates' values, one SIMD vector.
-using EightFloats = Eigen::Array<float, 8, 1>;
-
 // The 27 cells' points around one cell of a grid, as offsets from that cell's lowest corner in single precision
 // (small numbers: float keeps them to a nanometre at a centimetre), padded to a multiple of eight with points too
 // far for any kernel, so that the spread's sums take eight at a time without a test per candidate.
@@ -142,7 +139,7 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                 // covariance about the weighted mean follows).
                 const float px = float(sx[s] - corner.x()), py = float(sy[s] - corner.y()),
                             pz = float(sz[s] - corner.z());
-                EightFloats total = EightFloats::Zero(), m[3], q[6];
+                RowOfEight total = RowOfEight::Zero(), m[3], q[6];
                 for (auto& sum : m) sum.setZero();
                 for (auto& sum : q) sum.setZero();
                 // The candidates within the support are found in double, 64 at a time, and counted there: a
@@ -157,13 +154,13 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                     neighbours += std::size_t(__builtin_popcountll(bits));
                     for (std::size_t k = base; k != base + 64; k += 8) {
                         if (!(bits >> (k - base) & 0xffu)) continue;
-                        const EightFloats dx = Eigen::Map<const EightFloats>(near.x.data() + k) - px;
-                        const EightFloats dy = Eigen::Map<const EightFloats>(near.y.data() + k) - py;
-                        const EightFloats dz = Eigen::Map<const EightFloats>(near.z.data() + k) - pz;
-                        const EightFloats d2 = dx * dx + dy * dy + dz * dz;
-                        const EightFloats w = (1.f - d2 * d2.sqrt() * inverseCube).max(0.f);
+                        const RowOfEight dx = Eigen::Map<const RowOfEight>(near.x.data() + k) - px;
+                        const RowOfEight dy = Eigen::Map<const RowOfEight>(near.y.data() + k) - py;
+                        const RowOfEight dz = Eigen::Map<const RowOfEight>(near.z.data() + k) - pz;
+                        const RowOfEight d2 = dx * dx + dy * dy + dz * dz;
+                        const RowOfEight w = (1.f - d2 * d2.sqrt() * inverseCube).max(0.f);
                         total += w;
-                        const EightFloats wx = w * dx, wy = w * dy, wz = w * dz;
+                        const RowOfEight wx = w * dx, wy = w * dy, wz = w * dz;
                         m[0] += wx, m[1] += wy, m[2] += wz;
                         q[0] += wx * dx, q[1] += wy * dy, q[2] += wz * dz;
                         q[3] += wx * dy, q[4] += wx * dz, q[5] += wy * dz;
@@ -196,8 +193,7 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     return out;
 }
 
-// A row of a leaf along z, one SIMD vector, and its points' offsets.
-using RowOfEight = Eigen::Array<float, 8, 1>;
+// A row's points' offsets along z.
 const RowOfEight kRowSteps = RowOfEight::LinSpaced(8, 0, 7);
 
 // a b + c, rounded once where the target has FMA (the build leaves no product to the compiler to fuse, so that the

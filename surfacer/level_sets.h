@@ -12,6 +12,8 @@
 namespace ganache::surfacing {
 
 using FloatLeaf = openvdb::FloatTree::LeafNodeType;
+/// Eight floats, one SIMD vector: a row of a leaf along z, or eight candidates of a kernel's spread.
+using RowOfEight = Eigen::Array<float, 8, 1>;
 
 /// A leaf's values and one layer of its neighbours' around it, read once so that stencils need no tree lookups.
 class LeafNeighbourhood {

@@ -108,9 +108,6 @@ void trimLeaf(FloatLeaf& leaf, float band) {
 
 namespace {
 
-// Eight voxels along z, one SIMD vector.
-using RowOfEight = Eigen::Array<float, 8, 1>;
-
 // A row of eight values of the neighbourhood, offset from row (i, j) by (a, b) and along z by c (-1..1).
 struct Rows {
     const LeafNeighbourhood& p;
