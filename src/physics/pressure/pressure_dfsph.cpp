@@ -6,6 +6,7 @@
 
 #include <fmt/format.h>
 
+#include <functional>
 #include <limits>
 
 namespace ganache {
@@ -41,23 +42,29 @@ constexpr Real kRoundOff = 1e-6;
 PressureDFSPH::PressureDFSPH(const PressureSettings& settings, ParticleSet& particles)
     : m_settings(settings), m_pressure(&particles.add(attribute::kPressureWarmStart)) {}
 
-void PressureDFSPH::rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u,
-                          bool withBodies, std::vector<Real>& out) {
+template <class T, class Term, class Join>
+T PressureDFSPH::rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u,
+                       bool withBodies, std::vector<Real>& out, T zero, Term term, Join join) {
     const std::size_t n = particles.size();
     m_velocityRows.resize(n);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         sweeps::toRows(begin, end, u.data(), m_velocityRows.data());
     });
-    ratesOfRows(ctx, n, withBodies, out);
+    return ratesOfRows(ctx, n, withBodies, out, zero, term, join);
 }
 
-void PressureDFSPH::ratesOfRows(const StepContext& ctx, std::size_t n, bool withBodies, std::vector<Real>& out) const {
+template <class T, class Term, class Join>
+T PressureDFSPH::ratesOfRows(const StepContext& ctx, std::size_t n, bool withBodies, std::vector<Real>& out, T zero,
+                             Term term, Join join) const {
     out.resize(n);
-    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+    return deterministicBlockReduce<T>(n, [&](std::size_t begin, std::size_t end) {
         sweeps::densityRate(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
                             withBodies ? m_bodyRate.data() : nullptr, ctx.positionRows.data(), m_velocityRows.data(),
                             out.data());
-    });
+        T s = zero;
+        for (std::size_t i = begin; i < end; ++i) s = join(s, term(i));
+        return s;
+    }, zero, join);
 }
 
 void PressureDFSPH::velocityChanges(const StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s,
@@ -181,18 +188,14 @@ std::size_t PressureDFSPH::solveJacobi(Solve which, StepContext& ctx, ParticleSe
     auto& v = particles.v();
     m_error.resize(n);
     m_change.resize(n);
-    m_residual.resize(n);
     std::size_t iteration = 0;
     for (;; ++iteration) {
-        rates(ctx, particles, v, true, m_rate);
-        forEachParticle(n, [&](std::size_t i) {
+        const Real error = rates(ctx, particles, v, true, m_rate, Real(0), [&](std::size_t i) {
             m_error[i] = target(i, m_rate[i]);  // signed density error to remove [kg/m^3]
             // Complementarity residual: a particle under pressure must sit at rest density (an expanding one
             // is pushed too hard); one without pressure may only be too light.
-            m_residual[i] = (pressure[i] > 0 ? std::abs(m_error[i]) : std::max<Real>(m_error[i], 0)) /
-                            ctx.restDensity[i];
-        });
-        const Real error = deterministicSum(n, [&](std::size_t i) { return m_residual[i]; }) / Real(n);
+            return (pressure[i] > 0 ? std::abs(m_error[i]) : std::max<Real>(m_error[i], 0)) / ctx.restDensity[i];
+        }, std::plus<Real>()) / Real(n);
         if (finished(ctx, which, iteration, error)) return iteration;
         // Projected Jacobi step: the pressure of a particle never goes below zero.
         forEachParticle(n, [&](std::size_t i) {
@@ -228,12 +231,16 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     dv.resize(n);
     std::size_t products = 0;
     // dt^2 A d = -dt J dv with dv = -dt J^T d the velocity change of the pressures d: the sweeps leave J dv in q, and
-    // the pass after them scales it. Every pass over the particles also takes the sums the next decision needs: at
-    // 8k particles the vector passes around the sweeps cost about as much as the sweeps when each had its own loop.
-    auto multiply = [&](const std::vector<Real>& d) {
+    // the rate sweep's blocks scale it and go on to term(i), joined into what the next decision needs. Every pass over
+    // the particles takes what it can: at 8k particles the vector passes around the sweeps cost about as much as the
+    // sweeps when each had its own loop.
+    auto multiplyAnd = [&](const std::vector<Real>& d, auto zero, auto term, auto join) {
         velocityChanges(ctx, particles, d, dv, true);
-        ratesOfRows(ctx, n, false, q);
         ++products;
+        return ratesOfRows(ctx, n, false, q, zero, [&](std::size_t i) {
+            q[i] *= -ctx.dt;
+            return term(i);
+        }, join);
     };
     // D_i = dt^2 A_ii; particles without neighbours (factor 0) take no pressure.
     auto inverseD = [&](std::size_t i) { return m_factor[i] / dt2; };
@@ -278,8 +285,10 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
         return meanResidual <= 10 * tolerance ? Real(0.1) : Real(1);
     };
 
-    rates(ctx, particles, v, true, m_rate);
-    Vec3 measured = updateAndMeasure([&](std::size_t i) { e[i] = target(i, m_rate[i]); });
+    Vec3 measured = rates(ctx, particles, v, true, m_rate, Vec3(Vec3::Zero()), [&](std::size_t i) {
+        e[i] = target(i, m_rate[i]);
+        return measure(i);
+    }, std::plus<Vec3>());
     bool restart = true;
     std::size_t iteration = 0;
     for (;;) {
@@ -291,12 +300,10 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
         if (measured[1] > g * g * measured[2]) {
             // Proportioning: release the particles at zero pressure that their neighbours compress.
             forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * chopped(i); }, 4096);
-            multiply(z);
             using Vec2 = Eigen::Matrix<Real, 2, 1>;
-            const Vec2 zq = deterministicSum<Vec2>(n, [&](std::size_t i) {
-                q[i] *= -ctx.dt;
+            const Vec2 zq = multiplyAnd(z, Vec2(Vec2::Zero()), [&](std::size_t i) {
                 return Vec2(z[i] * q[i], chopped(i) * z[i]);
-            }, Vec2::Zero());
+            }, std::plus<Vec2>());
             if (!(zq[0] > 0)) break;
             measured = updateAndMeasure([&](std::size_t i) { moveOne(i, zq[1] / zq[0], z); });
             restart = true;
@@ -304,49 +311,44 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
         }
         if (restart) forEachParticle(n, [&](std::size_t i) { dir[i] = inverseD(i) * free(i); }, 4096);
         restart = false;
-        multiply(dir);
         // d . q, free . d, and the longest step that keeps every pressure >= 0.
         struct Sums {
             Real dq = 0, fd = 0, feasible = std::numeric_limits<Real>::infinity();
         };
-        const Sums sums = deterministicBlockReduce<Sums>(
-            n,
-            [&](std::size_t begin, std::size_t end) {
-                Sums s;
-                for (std::size_t i = begin; i < end; ++i) {
-                    q[i] *= -ctx.dt;
-                    s.dq += dir[i] * q[i];
-                    s.fd += free(i) * dir[i];
-                    if (dir[i] > 0) s.feasible = std::min(s.feasible, pressure[i] / dir[i]);
-                }
-                return s;
+        const Sums sums = multiplyAnd(
+            dir, Sums{},
+            [&](std::size_t i) {
+                return Sums{dir[i] * q[i], free(i) * dir[i],
+                            dir[i] > 0 ? pressure[i] / dir[i] : std::numeric_limits<Real>::infinity()};
             },
-            Sums{},
             [](const Sums& a, const Sums& b) {
                 return Sums{a.dq + b.dq, a.fd + b.fd, std::min(a.feasible, b.feasible)};
             });
         if (!(sums.dq > 0)) break;  // nothing left to move
         const Real step = sums.fd / sums.dq;
         if (step <= sums.feasible) {
-            // z = D^-1 free after the move, and beta = z . q / d . q for the next conjugate direction.
-            const Real zq = deterministicSum(n, [&](std::size_t i) {
+            // z = D^-1 free after the move, and beta = z . q / d . q for the next conjugate direction; what the next
+            // iteration decides on does not depend on the direction, so it is measured in the same pass.
+            using Vec4 = Eigen::Matrix<Real, 4, 1>;
+            const Vec4 zqMeasured = deterministicSum<Vec4>(n, [&](std::size_t i) {
                 moveOne(i, step, dir);
                 z[i] = inverseD(i) * free(i);
-                return z[i] * q[i];
-            });
-            const Real beta = zq / sums.dq;
-            measured = updateAndMeasure([&](std::size_t i) { dir[i] = z[i] - beta * dir[i]; });
+                const Vec3 m = measure(i);
+                return Vec4(z[i] * q[i], m[0], m[1], m[2]);
+            }, Vec4::Zero());
+            const Real beta = zqMeasured[0] / sums.dq;
+            measured = zqMeasured.tail<3>();
+            forEachParticle(n, [&](std::size_t i) { dir[i] = z[i] - beta * dir[i]; }, 4096);
         } else {
             // Expansion: up to the bound, then a projected gradient step; conjugate directions start again.
             forEachParticle(n, [&](std::size_t i) {
                 moveOne(i, sums.feasible, dir);
                 z[i] = pressure[i] - std::max<Real>(pressure[i] - kRelaxation * inverseD(i) * free(i), 0);
             }, 4096);
-            multiply(z);
-            measured = updateAndMeasure([&](std::size_t i) {
-                q[i] *= -ctx.dt;
+            measured = multiplyAnd(z, Vec3(Vec3::Zero()), [&](std::size_t i) {
                 moveOne(i, 1, z);
-            });
+                return measure(i);
+            }, std::plus<Vec3>());
             restart = true;
         }
     }

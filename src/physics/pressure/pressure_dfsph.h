@@ -43,11 +43,15 @@ private:
     std::size_t solveJacobi(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
                             Target target);
     // Drho/Dt of every particle for the velocities u, with the bodies' own velocities when withBodies (the
-    // system's product leaves them out).
-    void rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u, bool withBodies,
-               std::vector<Real>& out);
+    // system's product leaves them out); each fixed block of the sweep goes on to term(i) for its particles, and the
+    // results join (deterministically: see deterministicBlockReduce) into what is returned.
+    template <class T, class Term, class Join>
+    T rates(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& u, bool withBodies,
+            std::vector<Real>& out, T zero, Term term, Join join);
     // The same for the velocities already in m_velocityRows.
-    void ratesOfRows(const StepContext& ctx, std::size_t n, bool withBodies, std::vector<Real>& out) const;
+    template <class T, class Term, class Join>
+    T ratesOfRows(const StepContext& ctx, std::size_t n, bool withBodies, std::vector<Real>& out, T zero, Term term,
+                  Join join) const;
     // -dt (sum_j m_j (s_i + s_j) grad W_ij + kWall sum_k Psi_k s_i grad W_ik): every particle's velocity change from
     // the pressures s (kappa / rho); the boundary mirrors the particle's own pressure [AIA+12, BK17]. With rows, also
     // into m_velocityRows, for ratesOfRows.
@@ -72,7 +76,7 @@ private:
     std::vector<Real> m_pressureV;  // divergence-free pressure of this step
     std::vector<Real> m_start;      // pressures at the start of a solve
     // Scratch of the solvers, kept between steps.
-    std::vector<Real> m_error, m_direction, m_product, m_change, m_residual, m_rate;
+    std::vector<Real> m_error, m_direction, m_product, m_change, m_rate;
     std::vector<Vec3> m_velocityChange;
     // A rate's velocities as the sweeps read them (the positions' rows come with the step context).
     sweeps::Rows m_velocityRows;
