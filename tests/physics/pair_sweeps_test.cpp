@@ -98,6 +98,40 @@ TEST(PairSweeps, TakeTheDensityRateAndThePressuresVelocityChangeAsDefinedPairByP
     }
 }
 
+// Past a few hundred thousand particles the sweeps prefetch their neighbours' rows, in code of its own: the same
+// definitions hold there, to the last particle, whose pairs lie within the prefetch distance of the lists' end.
+TEST(PairSweeps, TakeTheSameSumsWhereTheyPrefetch) {
+    const Field f = field(300000);
+    ASSERT_TRUE(sweeps::prefetches(f.list, 2));
+    const std::size_t n = f.x.size();
+    const Real dt = 0.3;
+    std::vector<Vec3> out(n), out1(n), out2(n), out3(n), dv(n);
+    std::vector<Real> rate(n);
+    const sweeps::Pairs pairs{&f.list, f.weight.data()};
+    sweeps::viscousProduct(0, n, pairs, f.block.data(), f.xRows.data(), f.uRows.data(), dt, out.data());
+    sweeps::viscousProducts(0, n, pairs, f.block.data(), f.xRows.data(), f.xRows.data(), f.uRows.data(),
+                            f.xRows.data(), dt, out1.data(), out2.data(), out3.data());
+    sweeps::densityRate(0, n, pairs, f.boundarySum.data(), f.bodyRate.data(), f.xRows.data(), f.uRows.data(),
+                        rate.data());
+    sweeps::pressureChange(0, n, pairs, f.boundarySum.data(), f.xRows.data(), f.s.data(), dt, dv.data());
+    std::size_t wrong = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        Vec3 a = Vec3::Zero(), push = f.s[i] * f.boundarySum[i];
+        Real r = f.u[i].dot(f.boundarySum[i]) - f.bodyRate[i];
+        for (std::size_t p = f.list.first(i); p < f.list.last(i); ++p) {
+            const std::size_t j = f.list.indices[p];
+            const Vec3 d = f.x[i] - f.x[j];
+            a += f.weight[p] * d.dot(f.u[i] - f.u[j]) * d;
+            r += f.weight[p] * (f.u[i] - f.u[j]).dot(d);
+            push += f.weight[p] * (f.s[i] + f.s[j]) * d;
+        }
+        const Vec3 expected = f.u[i] - dt * a + f.block[i] * f.u[i];
+        wrong += (out[i] - expected).norm() >= kTolerance || out2[i] != out[i] ||
+                 std::abs(rate[i] - r) >= kTolerance || (dv[i] + dt * push).norm() >= kTolerance;
+    }
+    EXPECT_EQ(wrong, 0u) << "particles whose sums differ from the definitions";
+}
+
 TEST(PairSweeps, TakeTheSquaredDistancesAndThePushSumsAsDefinedPairByPair) {
     const Field f = field(40);
     std::vector<Real> d2(f.list.pairs());
