@@ -119,7 +119,7 @@ inline Real sum(Lanes a) {
 // the rows of the pair kAhead ahead are asked for in advance: `sweep_bench`'s 1M products 15-25 % faster. Below, where
 // the rows stay in the caches, the extra instructions cost: the 50k product was 20 % slower with them.
 constexpr std::size_t kPrefetchFrom = std::size_t(16) << 20;
-constexpr std::uint64_t kAhead = 64;
+constexpr std::uint64_t kAhead = 128;
 
 // Calls group(c, p, count, j) for each group of four of particle i's pairs, p .. p + count: j the four neighbours and
 // c[s] their rows of `rows[s]`, transposed (c[s][k]'s lanes are the neighbours' entries k). A tail's missing pairs are
