@@ -116,9 +116,10 @@ inline Real sum(Lanes a) {
 // Past this many bytes of rows read at random, a sweep no longer finds its neighbours' rows in the caches between the
 // particles that share them, and with the few loads a core keeps in flight it waits on memory: the viscous product at
 // 1M particles ran 2.3-2.9x faster on two threads than on one, where the memory's streaming rate gains 1.1-1.9x. There
-// the rows of the pair kAhead ahead are asked for in advance: `sweep_bench`'s 1M products 15-25 % faster. Below, where
-// the rows stay in the caches, the extra instructions cost: the 50k product was 20 % slower with them.
-constexpr std::size_t kPrefetchFrom = std::size_t(16) << 20;
+// the rows of the pair kAhead ahead are asked for in advance (`sweep_bench`, 1 / 2 threads, ns a particle: the viscous
+// product at 1M 84 -> 52 / 33-44 -> 23-24, at 195k 45-80 -> 44-46 / 30-33 -> 25-27). Where the rows stay in the
+// caches the extra instructions cost (8k: 26-40 -> 35 on 1 thread), and at 50k it was a draw.
+constexpr std::size_t kPrefetchFrom = std::size_t(8) << 20;
 constexpr std::uint64_t kAhead = 128;
 
 // Calls group(c, p, count, j) for each group of four of particle i's pairs, p .. p + count: j the four neighbours and

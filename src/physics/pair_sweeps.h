@@ -31,7 +31,7 @@ using PairWeights = std::vector<PairWeight>;
 void toRows(std::size_t begin, std::size_t end, const Vec3* v, Row* rows);
 
 /// Whether the sweeps over `list` that read `rows` arrays of rows at the neighbours prefetch them a few dozen pairs
-/// ahead: only where those rows outgrow the caches (at about 260k particles for two arrays).
+/// ahead: only where those rows outgrow the caches (from about 130k particles for two arrays).
 bool prefetches(const NeighbourList& list, int rows);
 
 /// One neighbour list with a weight per pair (nullptr: the list takes no part).

@@ -101,7 +101,7 @@ TEST(PairSweeps, TakeTheDensityRateAndThePressuresVelocityChangeAsDefinedPairByP
 // Past a few hundred thousand particles the sweeps prefetch their neighbours' rows, in code of its own: the same
 // definitions hold there, to the last particle, whose pairs lie within the prefetch distance of the lists' end.
 TEST(PairSweeps, TakeTheSameSumsWhereTheyPrefetch) {
-    const Field f = field(300000);
+    const Field f = field(150000);
     ASSERT_TRUE(sweeps::prefetches(f.list, 2));
     const std::size_t n = f.x.size();
     const Real dt = 0.3;
