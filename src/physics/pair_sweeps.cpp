@@ -192,6 +192,15 @@ void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Ma
         viscousProductsOf<N, false>(begin, end, fluid, boundaryBlock, x, in, dt, out);
 }
 
+// Prefetches a[j] and b[j] for the neighbour j of pair p + kAhead, where the lists' `pairs` reach that far.
+template <class A, class B>
+inline void prefetchAhead(const std::uint32_t* idx, std::uint64_t p, std::uint64_t pairs, const A* a, const B* b) {
+    if (p + kAhead < pairs) {
+        __builtin_prefetch(a + idx[p + kAhead]);
+        __builtin_prefetch(b + idx[p + kAhead]);
+    }
+}
+
 // The pressure sweeps take one pair per vector, its lanes the coordinates, and add the lanes only at the end: their
 // pairs need no sum over coordinates in between (the viscous product's do, hence its groups of four pairs).
 template <bool Ahead>
@@ -204,11 +213,7 @@ void densityRateOf(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* 
         const Lanes xi = load(x[i]), ui = load(u[i]);
         Lanes a = zero();  // the fourth lane stays zero: the rows' fourth values are
         for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
-            if constexpr (Ahead)
-                if (p + kAhead < pairs) {
-                    __builtin_prefetch(x + idx[p + kAhead]);
-                    __builtin_prefetch(u + idx[p + kAhead]);
-                }
+            if constexpr (Ahead) prefetchAhead(idx, p, pairs, x, u);
             const std::uint32_t j = idx[p];
             a = a + broadcast(Real(fluid.weight[p])) * ((ui - load(u[j])) * (xi - load(x[j])));
         }
@@ -231,11 +236,7 @@ void pressureChangeOf(std::size_t begin, std::size_t end, Pairs fluid, const Vec
         const Lanes xi = load(x[i]), si = broadcast(s[i]);
         Lanes a = zero();
         for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
-            if constexpr (Ahead)
-                if (p + kAhead < pairs) {
-                    __builtin_prefetch(x + idx[p + kAhead]);
-                    __builtin_prefetch(s + idx[p + kAhead]);
-                }
+            if constexpr (Ahead) prefetchAhead(idx, p, pairs, x, s);
             const std::uint32_t j = idx[p];
             a = a + (broadcast(Real(fluid.weight[p])) * (si + broadcast(s[j]))) * (xi - load(x[j]));
         }
