@@ -19,12 +19,15 @@ struct PairSystem {
     sweeps::PairWeights k;
     Real dt = 0.01;
 
-    explicit PairSystem(int side) {
+    // side^3 jittered lattice points from each corner
+    explicit PairSystem(int side, const std::vector<Vec3>& corners = {Vec3::Zero()}) {
         std::mt19937 rng(7);
         std::uniform_real_distribution<Real> jitter(-0.1, 0.1);
-        for (int a = 0; a < side; ++a)
-            for (int b = 0; b < side; ++b)
-                for (int c = 0; c < side; ++c) x.emplace_back(a + jitter(rng), b + jitter(rng), c + jitter(rng));
+        for (const Vec3& corner : corners)
+            for (int a = 0; a < side; ++a)
+                for (int b = 0; b < side; ++b)
+                    for (int c = 0; c < side; ++c)
+                        x.push_back(corner + Vec3(a + jitter(rng), b + jitter(rng), c + jitter(rng)));
         UniformGrid grid(kSupport);
         findFluidNeighbours(grid, x, kSupport, fluid);
         k.resize(fluid.pairs());
@@ -116,6 +119,26 @@ TEST(ClusterModes, FewerLargerClustersStillHoldTheWholeFluidsRigidMotion) {
     std::vector<Vec3> z(s.x.size(), Vec3::Zero());
     modes.addCorrection(s.x, s.multiply(motion), z);
     EXPECT_LT(largestDifference(z, motion), 1e-9);
+}
+
+TEST(ClusterModes, CountsTheClustersOfFluidFarApart) {
+    // Two lumps 2,000 spacings apart along every axis: the fluid's box holds about 10^8 cells of the coarse space, too
+    // many for the table that counts occupied cells, so the clusters are counted from the sorted keys. The same
+    // clusters either way: one per occupied cell; capped at 2, the cells grow until each lump is one.
+    const PairSystem s(5, {Vec3::Zero(), Vec3::Constant(2000)});
+    const Real cell = 2 * PairSystem::kSupport;
+    Vec3 lo = s.x[0];
+    for (const Vec3& xi : s.x) lo = lo.cwiseMin(xi);
+    std::map<std::array<int, 3>, int> occupied;
+    for (const Vec3& xi : s.x) {
+        const Vec3 c = ((xi - lo) / cell).array().floor();
+        ++occupied[{int(c.x()), int(c.y()), int(c.z())}];
+    }
+    ClusterModes modes;
+    modes.build(s.x, nullptr, cell, 1000, s.fluid, s.k, s.dt, nullptr, {});
+    EXPECT_EQ(modes.clusters(), occupied.size());
+    modes.build(s.x, nullptr, cell, 2, s.fluid, s.k, s.dt, nullptr, {});
+    EXPECT_EQ(modes.clusters(), 2u);
 }
 
 TEST(BlockLdlt, SolvesASparseBlockSystemAsADenseFactorisationDoes) {
