@@ -98,7 +98,7 @@ TEST(PairSweeps, TakeTheDensityRateAndThePressuresVelocityChangeAsDefinedPairByP
     }
 }
 
-// Past a few hundred thousand particles the sweeps prefetch their neighbours' rows, in code of its own: the same
+// From about 130k particles the sweeps prefetch their neighbours' rows, in code of its own: the same
 // definitions hold there, to the last particle, whose pairs lie within the prefetch distance of the lists' end.
 TEST(PairSweeps, TakeTheSameSumsWhereTheyPrefetch) {
     const Field f = field(150000);
