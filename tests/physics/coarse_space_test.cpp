@@ -122,9 +122,9 @@ TEST(ClusterModes, FewerLargerClustersStillHoldTheWholeFluidsRigidMotion) {
 }
 
 TEST(ClusterModes, CountsTheClustersOfFluidFarApart) {
-    // Two lumps 2,000 spacings apart along every axis: the fluid's box holds about 10^8 cells of the coarse space, too
-    // many for the table that counts occupied cells, so the clusters are counted from the sorted keys. The same
-    // clusters either way: one per occupied cell; capped at 2, the cells grow until each lump is one.
+    // Two lumps 2,000 spacings apart along every axis: the fluid's box holds about 10^8 cells of the coarse space for
+    // 250 particles, too many for the table that counts occupied cells, so the clusters are counted from the sorted
+    // keys. The same clusters either way: one per occupied cell; capped at 2, the cells grow until each lump is one.
     const PairSystem s(5, {Vec3::Zero(), Vec3::Constant(2000)});
     const Real cell = 2 * PairSystem::kSupport;
     Vec3 lo = s.x[0];

@@ -236,8 +236,9 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
     };
     // How many clusters cells of this size make: the occupied (cell, group) pairs marked on a table over the fluid's
     // box. Sorting the keys to count them, as the final order needs once, took four sorts a step at 1.1M particles
-    // (20-25 ms each of a 240-330 ms build). Where the box holds too many cells for a table, the keys are sorted.
-    constexpr std::uint64_t kMostTableCells = std::uint64_t(1) << 26;
+    // (20-25 ms each of a 240-330 ms build). Where the box holds more than a few cells a particle (a spray, fluid far
+    // apart), clearing the table would cost more than sorting: there the keys are sorted.
+    const std::uint64_t mostTableCells = 8 * std::uint64_t(n) + 65536;
     std::vector<std::uint8_t> occupied;
     auto countClusters = [&]() -> std::size_t {
         std::array<std::uint64_t, 3> cells{};
@@ -246,7 +247,7 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
             cells[a] = std::uint64_t(std::floor((box.second[int(a)] - lo[int(a)]) / cellSize)) + 1;
             total *= cells[a];
         }
-        if (total > kMostTableCells) {
+        if (total > mostTableCells) {
             std::vector<std::int64_t> keys(n);
             forEachParticle(n, [&](std::size_t i) { keys[i] = keyed[i].first; });
             tbb::parallel_sort(keys.begin(), keys.end());
