@@ -68,6 +68,7 @@ void CellCandidates::gather(const UniformGrid& grid, const std::array<std::int32
     std::size_t from[27], to[27];
     int cells = 0;
     count = 0;
+    if (!grid.mayHoldAround(cell)) return;  // a fluid cell far from every wall: no lookups
     for (int dz = -1; dz <= 1; ++dz)
         for (int dy = -1; dy <= 1; ++dy)
             for (int dx = -1; dx <= 1; ++dx) {
@@ -183,7 +184,9 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     // table finds a cell with one load instead of a hashed probe; its size is capped at a few words per cell.
     m_denseCells.clear();
     if (m_cellCoords.empty()) return;
-    std::array<std::int64_t, 3> lo{m_cellCoords[0][0], m_cellCoords[0][1], m_cellCoords[0][2]}, hi = lo;
+    auto& lo = m_cellMin;
+    auto& hi = m_cellMax;
+    lo = {m_cellCoords[0][0], m_cellCoords[0][1], m_cellCoords[0][2]}, hi = lo;
     for (const auto& c : m_cellCoords)
         for (int a = 0; a < 3; ++a) {
             lo[a] = std::min<std::int64_t>(lo[a], c[a]);
@@ -205,6 +208,13 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
 void UniformGrid::releaseWorkingMemory() {
     std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(m_keyed);
     std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(m_keyedScratch);
+}
+
+bool UniformGrid::mayHoldAround(const std::array<std::int32_t, 3>& cell) const {
+    if (m_cellKeys.empty()) return false;
+    for (int a = 0; a < 3; ++a)
+        if (cell[a] < m_cellMin[a] - 1 || cell[a] > m_cellMax[a] + 1) return false;
+    return true;
 }
 
 std::int64_t UniformGrid::findCell(std::int64_t cx, std::int64_t cy, std::int64_t cz) const {

@@ -73,6 +73,9 @@ public:
     std::size_t cellBegin(std::size_t c) const { return m_cellBegin[c]; }
     /// Integer coordinates of cell c.
     const std::array<std::int32_t, 3>& cellCoords(std::size_t c) const { return m_cellCoords[c]; }
+    /// Whether any of the 27 cells around this one can hold a point (it lies within one cell of the occupied cells'
+    /// bounding box).
+    bool mayHoldAround(const std::array<std::int32_t, 3>& cell) const;
     /// Index of the occupied cell with these coordinates, or -1 when it holds no point.
     std::int64_t findCell(std::int64_t cx, std::int64_t cy, std::int64_t cz) const;
     /// Whether cells are found through a dense table over the occupied cells' bounding box (compact point sets)
@@ -88,6 +91,7 @@ private:
     std::vector<std::uint64_t> m_cellKeys;   // Morton keys of the occupied cells, ascending
     std::vector<std::uint32_t> m_cellBegin;  // cellCount() + 1 offsets into m_sorted
     std::vector<std::array<std::int32_t, 3>> m_cellCoords;
+    std::array<std::int64_t, 3> m_cellMin{}, m_cellMax{};  // the occupied cells' bounding box
     std::vector<std::uint64_t> m_tableKeys;  // open-addressing hash: Morton key -> cell index
     std::vector<std::uint32_t> m_tableCells;
     int m_tableBits = 0;
