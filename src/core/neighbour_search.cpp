@@ -186,7 +186,8 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     if (m_cellCoords.empty()) return;
     auto& lo = m_cellMin;
     auto& hi = m_cellMax;
-    lo = {m_cellCoords[0][0], m_cellCoords[0][1], m_cellCoords[0][2]}, hi = lo;
+    lo = {m_cellCoords[0][0], m_cellCoords[0][1], m_cellCoords[0][2]};
+    hi = lo;
     for (const auto& c : m_cellCoords)
         for (int a = 0; a < 3; ++a) {
             lo[a] = std::min<std::int64_t>(lo[a], c[a]);

@@ -58,6 +58,14 @@ std::int64_t clusterKey(const Vec3& x, const Vec3& lo, Real cellSize, std::uint8
     return (key << 8) | group;
 }
 
+/// The cell coordinates a clusterKey holds.
+std::array<std::uint64_t, 3> keyCell(std::int64_t key) {
+    constexpr std::int64_t kAxis = (std::int64_t(1) << kAxisBits) - 1;
+    std::array<std::uint64_t, 3> c{};
+    for (int a = 2; a >= 0; --a, key >>= kAxisBits) c[std::size_t(a)] = std::uint64_t(key >> 8 & kAxis);
+    return c;
+}
+
 }  // namespace
 
 void RigidModes::build(const std::vector<Vec3>& x, const std::vector<Mat3>* extra,
@@ -256,13 +264,10 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
             return count;
         }
         occupied.assign(total, 0);
-        constexpr std::int64_t kAxis = (std::int64_t(1) << kAxisBits) - 1;
         for (const auto& [key, i] : keyed) {
             if (key == kOutside) continue;
-            const std::uint64_t cz = std::uint64_t(key >> 8 & kAxis);
-            const std::uint64_t cy = std::uint64_t(key >> (8 + kAxisBits) & kAxis);
-            const std::uint64_t cx = std::uint64_t(key >> (8 + 2 * kAxisBits) & kAxis);
-            occupied[((cx * cells[1] + cy) * cells[2] + cz) * groups + groupIndex[std::size_t(key & 0xff)]] = 1;
+            const auto c = keyCell(key);
+            occupied[((c[0] * cells[1] + c[1]) * cells[2] + c[2]) * groups + groupIndex[std::size_t(key & 0xff)]] = 1;
         }
         return std::size_t(std::count(occupied.begin(), occupied.end(), std::uint8_t(1)));
     };
