@@ -1,7 +1,8 @@
 // The solvers' inner loops on their own: one viscous product (I - dt A) v and one pressure product (a velocity change
 // and a density rate) per iteration, on a jittered lattice block in Z order, at 8k, 50k, 200k and 1M particles on 1
 // and 2 threads; beside them the machine's streaming bandwidth (a triad over 256 MiB arrays), so that each product's
-// cost can be set against the time its bytes take to move.
+// cost can be set against the time its bytes take to move; and the viscous product alone on input rows that no thread
+// rewrites between passes (`viscousKeptRows`), which shows what two threads lose to each other's fresh writes.
 // Run: build/benchmarks/sweep_bench --benchmark_counters_tabular=true
 
 #include "core/kernels.h"
@@ -91,6 +92,22 @@ void viscous(benchmark::State& state) {
     setCounters(state, b, productBytes(b, 24, 24));
 }
 
+// The product alone, its input rows written once before the loop: set against `viscous`, what it costs a sweep that
+// another thread wrote the rows it reads since its last pass (on two threads every solver iteration does).
+void viscousKeptRows(benchmark::State& state) {
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(1)));
+    const Block b = block(std::size_t(state.range(0)));
+    std::vector<Vec3> out(b.x.size());
+    for (auto _ : state) {
+        forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
+            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.xRows.data(), b.vRows.data(),
+                                   1e-3, out.data());
+        });
+        benchmark::DoNotOptimize(out.data());
+    }
+    setCounters(state, b, productBytes(b, 24, 24));
+}
+
 void pressure(benchmark::State& state) {
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(1)));
     const Block b = block(std::size_t(state.range(0)));
@@ -133,6 +150,7 @@ void triad(benchmark::State& state) {
 }  // namespace
 
 BENCHMARK(viscous)->ArgsProduct({{8000, 50653, 195112, 1000000}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(viscousKeptRows)->ArgsProduct({{8000, 50653}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(pressure)->ArgsProduct({{8000, 50653, 195112, 1000000}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(triad)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 
