@@ -27,23 +27,12 @@ void forEachBlock(std::size_t n, F&& f, std::size_t grain = 512) {
                       [&](const auto& r) { f(r.begin(), r.end()); });
 }
 
-/// The most particles of a fixed block. forEachFixedBlock and deterministicBlockReduce cut [0, n) into the same
-/// blocks, for any thread count: halves, halved again until none holds more.
-inline constexpr std::size_t kFixedBlock = 2048;
-
-/// Calls f(begin, end) on the fixed blocks of [0, n) in parallel; f must write only the slots of its block.
-template <class F>
-void forEachFixedBlock(std::size_t n, F&& f) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kFixedBlock),
-                      [&](const auto& r) { f(r.begin(), r.end()); }, tbb::simple_partitioner());
-}
-
 /// f(begin, end) over fixed blocks of [0, n), the blocks' results joined by `join` (associative: a sum, a minimum, or
 /// several at once) in an order that does not depend on the thread count. f may write the slots of its block.
 template <class T, class F, class Join>
 T deterministicBlockReduce(std::size_t n, F&& f, T zero, Join join) {
     return tbb::parallel_deterministic_reduce(
-        tbb::blocked_range<std::size_t>(0, n, kFixedBlock), zero,
+        tbb::blocked_range<std::size_t>(0, n, 2048), zero,
         [&](const auto& r, T s) { return join(s, f(r.begin(), r.end())); }, join);
 }
 

@@ -1,10 +1,5 @@
 #include "physics/pair_sweeps.h"
 
-#include "core/parallel.h"
-
-#include <tbb/task_arena.h>
-
-#include <array>
 #include <cstdint>
 
 #if defined(__AVX2__)
@@ -253,24 +248,7 @@ void pressureChangeOf(std::size_t begin, std::size_t end, Pairs fluid, const Vec
     }
 }
 
-template <class T>
-const T* ownCopyOf(std::size_t n, const T* values, std::vector<T>& copy) {
-    if (n > 2 * kFixedBlock || tbb::this_task_arena::max_concurrency() < 2) return values;
-    copy.assign(values, values + n);
-    return copy.data();
-}
-
 }  // namespace
-
-const Row* ownCopy(std::size_t n, const Row* values, int slot) {
-    thread_local std::array<Rows, 3> copies;
-    return ownCopyOf(n, values, copies.at(std::size_t(slot)));
-}
-
-const Real* ownCopy(std::size_t n, const Real* values) {
-    thread_local std::vector<Real> copy;
-    return ownCopyOf(n, values, copy);
-}
 
 bool prefetches(const NeighbourList& list, int rows) {
     return list.particles() * sizeof(Row) * std::size_t(rows) > kPrefetchFrom;

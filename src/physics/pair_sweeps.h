@@ -34,15 +34,6 @@ void toRows(std::size_t begin, std::size_t end, const Vec3* v, Row* rows);
 /// ahead: only where those rows outgrow the caches (from about 130k particles for two arrays).
 bool prefetches(const NeighbourList& list, int rows);
 
-/// What a sweep over a fixed block of [0, n) (forEachFixedBlock, deterministicBlockReduce) should read of `values`,
-/// which it reads at its particles' neighbours: `values`, or where two threads share a fluid of at most two fixed
-/// blocks, a copy in a buffer of the sweeping thread's, made in one pass. On two threads a sweep that reads values
-/// the other core has just written waits on each of them in turn (docs/benchmarks.md, "What two threads lose to each
-/// other's writes"); copied in one pass they arrive together. With more blocks each would copy more than it reads.
-/// A sweep that reads several arrays gives each its own `slot` (0-2).
-const Row* ownCopy(std::size_t n, const Row* values, int slot = 0);
-const Real* ownCopy(std::size_t n, const Real* values);
-
 /// One neighbour list with a weight per pair (nullptr: the list takes no part).
 struct Pairs {
     const NeighbourList* list = nullptr;

@@ -59,8 +59,8 @@ T PressureDFSPH::ratesOfRows(const StepContext& ctx, std::size_t n, bool withBod
     out.resize(n);
     return deterministicBlockReduce<T>(n, [&](std::size_t begin, std::size_t end) {
         sweeps::densityRate(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
-                            withBodies ? m_bodyRate.data() : nullptr, ctx.positionRows.data(),
-                            sweeps::ownCopy(n, m_velocityRows.data()), out.data());
+                            withBodies ? m_bodyRate.data() : nullptr, ctx.positionRows.data(), m_velocityRows.data(),
+                            out.data());
         T s = zero;
         for (std::size_t i = begin; i < end; ++i) s = join(s, term(i));
         return s;
@@ -71,10 +71,10 @@ void PressureDFSPH::velocityChanges(const StepContext& ctx, const ParticleSet& p
                                     std::vector<Vec3>& out, bool rows) {
     out.resize(particles.size());
     if (rows) m_velocityRows.resize(particles.size());
-    forEachFixedBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
+    forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::pressureChange(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
-                               ctx.positionRows.data(), sweeps::ownCopy(particles.size(), s.data()), ctx.dt,
-                               out.data(), rows ? m_velocityRows.data() : nullptr);
+                               ctx.positionRows.data(), s.data(), ctx.dt, out.data(),
+                               rows ? m_velocityRows.data() : nullptr);
     });
 }
 

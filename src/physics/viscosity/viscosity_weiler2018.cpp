@@ -66,8 +66,8 @@ Real ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& pa
     });
     return deterministicBlockSum(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::viscousProduct(begin, end, {&ctx.fluidNeighbours, pairs().data()},
-                               sticky() ? m_boundaryBlock.data() : nullptr, ctx.positionRows.data(),
-                               sweeps::ownCopy(particles.size(), m_inputRows.data()), ctx.dt, out.data());
+                               sticky() ? m_boundaryBlock.data() : nullptr, ctx.positionRows.data(), m_inputRows.data(),
+                               ctx.dt, out.data());
         Real s = 0;
         for (std::size_t i = begin; i < end; ++i) s += in[i].dot(out[i]);
         return s;
@@ -173,16 +173,14 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     });
     const sweeps::Pairs fluidPairs{&ctx.fluidNeighbours, pairs().data()};
     const Mat3* boundary = sticky() ? m_boundaryBlock.data() : nullptr;
-    forEachFixedBlock(n, [&](std::size_t begin, std::size_t end) {
-        const sweeps::Row* in1 = sweeps::ownCopy(n, m_inputRows.data(), 0);
-        const sweeps::Row* in2 = sweeps::ownCopy(n, m_inputRows2.data(), 1);
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         if (last)
-            sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), in1, in2,
-                                    sweeps::ownCopy(n, m_inputRows3.data(), 2), dt, m_start.data(),
+            sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), m_inputRows.data(),
+                                    m_inputRows2.data(), m_inputRows3.data(), dt, m_start.data(),
                                     m_lastProduct.data(), m_earlierProduct.data());
         else
-            sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), in1, in2, dt,
-                                    m_start.data(), m_guess.data());
+            sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), m_inputRows.data(),
+                                    m_inputRows2.data(), dt, m_start.data(), m_guess.data());
     });
     if (last) leastEnergyGuess(m_b, v, m_start, *last, m_lastProduct, *earlier, m_earlierProduct, out, m_guess);
     ViscosityPass pass = m_cg.solve(system, precondition, m_b, v, m_start, m_guess, out, tolerance,
