@@ -6,8 +6,9 @@ solve, beside the paper's figures (2 x 18-core Xeon E5-2697).
 
 Each row is a variant of a scene in scenes/ at the paper's particle count, time step and viscosity, simulated for
 STEPS steps (default 20) from its first contact with the floor (the bunny and the statue start on it at 1 m/s, so
-every measured step has an impact's work); the paper averages whole animations, so its early free fall is in its figures
-and not here. Environment: GANACHE (default build/src/ganache), THREADS (default 2), STEPS, OUT (default
+every measured step has an impact's work); the paper averages whole animations, so its early free fall and its calm
+end are in its figures and not here: STEPS=200 or 2000 measure more of what follows the impact (docs/benchmarks.md,
+"Longer windows"). Environment: GANACHE (default build/src/ganache), THREADS (default 2), STEPS, OUT (default
 out/table2). The coiling (25k) and buckling (80k) rows are emitter scenes that reach the paper's counts only after
 seconds of simulated time; they are not measured here but by running their scenes at final quality (docs/paper.md).
 """
