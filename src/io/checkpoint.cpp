@@ -19,8 +19,8 @@ namespace {
 constexpr char kMagic[8] = {'G', 'N', 'C', 'H', 'C', 'K', 'P', 'T'};
 // 2: effects save their own state; 3: the viscosity warm start's steps; 4: steps past the CFL limit; 5: which
 // particles the viscosity moves as one body (attribute::kViscouslyRigid); 6: the latest constant-density solve's
-// iterations (they set the next divergence-free solve's minimum)
-constexpr std::uint32_t kVersion = 6;
+// iterations (they set the next divergence-free solve's minimum); 7: the pressure solver's coarse space
+constexpr std::uint32_t kVersion = 7;
 
 // Writing and reading share one description of the state (fields() below): the same calls on a ByteWriter append
 // each value, on a ByteReader take it back, so the two can never disagree on the order.
@@ -92,6 +92,7 @@ void fields(IO& io, Info& info, State& s) {
     if constexpr (std::is_const_v<State>) io(std::uint64_t(s.effects.size()));
     else s.effects.resize(io.count(1));
     for (auto& e : s.effects) effectFields(io, e);
+    io(s.pressure);
     io(s.totalImpulse), io(s.totalAngular), io(s.peakForce);
     statsFields(io, s.stats);
 }

@@ -50,6 +50,12 @@ struct PressureSettings {
     /// viscosity solve spreads over the whole body: a 1e6 Pa s block rebounded at 9 cm/s (27,000 particles). Half a
     /// step's worth (Baumgarte's error reduction, as rigid-body contact solvers use) lets it land.
     Real rigidCorrection = 0.5;
+    /// Fluid particles from which the projected CG solves also solve exactly for pressures constant over cells of
+    /// about 4^3 particles (PressureCoarseSpace): a pressure then crosses a body at once instead of a layer an
+    /// iteration. It pays on bodies many layers thick: on the 50k anchor block 7.5 -> 4.3 products a step, the step
+    /// 10-14 % faster; on the 8k block 5.1 -> 4.1 products, the step within the noise; on the 2.6k buckling sheet no
+    /// fewer products and the step 4-6 % slower (1 thread, docs/benchmarks.md).
+    std::int64_t coarseFrom = 20000;
 };
 
 /// Where the viscosity solve sits in a step (see simulation.h).

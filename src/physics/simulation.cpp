@@ -77,6 +77,9 @@ SimulationState Simulation::state() const {
         e.effect->save(out);
         s.effects.push_back({e.name, e.seconds, std::move(out.bytes)});
     }
+    ByteWriter pressure;
+    m_pressure->save(pressure);
+    s.pressure = std::move(pressure.bytes);
     s.totalImpulse = m_totalImpulse;
     s.totalAngular = m_totalAngular;
     s.peakForce = m_peakForce;
@@ -108,11 +111,15 @@ void Simulation::restore(const SimulationState& s) {
     m_totalAngular = s.totalAngular;
     m_peakForce = s.peakForce;
     m_stats = s.stats;
-    // What the saved simulation computed at the end of its last step, from the same positions and order.
+    ByteReader pressure(s.pressure);
+    m_pressure->restore(pressure);
+    if (!pressure.atEnd()) throw std::runtime_error("the saved state of the pressure solver is too long");
+    // What the saved simulation computed at the end of its last step, from the same positions and order; the pressure
+    // solver's coarse space is the saved one.
     moveBoundaries(m_time);
     updateNeighbours(false);
     computeDensities();
-    m_pressure->computeFactors(context(0), m_fluid);
+    m_pressure->computeFactors(context(0), m_fluid, false);
 }
 
 StepContext Simulation::context(Real dt) {

@@ -97,6 +97,7 @@ struct SimulationState {
     std::uint64_t step = 0;
     ParticleSet fluid;  ///< every attribute, the solvers' warm starts included, in the simulation's order
     std::vector<EffectState> effects;
+    std::string pressure;  ///< what the pressure solver saved (PressureDFSPH::save)
     std::vector<Vec3> totalImpulse, totalAngular;  ///< per body, over the run
     std::vector<Real> peakForce;
     SolverStats stats;

@@ -561,6 +561,7 @@ Scene loadScene(const std::filesystem::path& file, const Quality& quality) {
             ps.integer("min_divergence_iterations", p.minDivergenceIterations, 0, p.maxIterations);
         p.impactIterations = ps.integer("impact_iterations", p.impactIterations, 0, p.maxIterations);
         p.rigidCorrection = ps.number("rigid_correction", p.rigidCorrection, "", Bounds::positiveUpTo(1));
+        p.coarseFrom = ps.integer("coarse_from", p.coarseFrom, 0, std::numeric_limits<std::int32_t>::max());
         ps.rejectUnused();
         // A name, or (as before there were names) a number: 0 is the paper's order, n >= 1 n coupled passes.
         ViscosityOrder& order = scene.viscosityOrder;

@@ -23,6 +23,7 @@ SimulationState sampleState() {
     s.fluid.addScalar("_pressure", 0, false)[1] = -0.0;
     s.fluid.addVector("_viscosity_dv", Vec3(1e-17, 2, 3), false);
     s.effects = {{"viscosity", 12.5, std::string("\0\x01saved", 7)}, {"emitters", 0.25, ""}};
+    s.pressure = std::string("\x02\0coarse", 8);
     s.totalImpulse = {Vec3(1, 2, 3)};
     s.totalAngular = {Vec3(-1, 0, 1)};
     s.peakForce = {9.5};
@@ -67,6 +68,7 @@ TEST(Checkpoint, EveryFieldComesBackExactly) {
         EXPECT_EQ(c.state.effects[e].seconds, s.effects[e].seconds);
         EXPECT_EQ(c.state.effects[e].bytes, s.effects[e].bytes);
     }
+    EXPECT_EQ(c.state.pressure, s.pressure);
     EXPECT_EQ(c.state.totalImpulse, s.totalImpulse);
     EXPECT_EQ(c.state.totalAngular, s.totalAngular);
     EXPECT_EQ(c.state.peakForce, s.peakForce);

@@ -3,6 +3,7 @@
 // Viscous Fluids", IEEE TVCG 23(3)), with boundaries after Akinci et al. 2012.
 
 #include "physics/pair_sweeps.h"
+#include "physics/pressure/pressure_coarse.h"
 #include "physics/simulation.h"
 
 namespace ganache {
@@ -16,8 +17,12 @@ public:
     PressureDFSPH(const PressureSettings& settings, ParticleSet& particles);
 
     /// DFSPH factors 1 / (|sum m grad W + kWall sum Psi grad W|^2 + sum |m grad W|^2) at the current
-    /// positions [BK17 Eq. 11].
-    void computeFactors(const StepContext& ctx, const ParticleSet& particles);
+    /// positions [BK17 Eq. 11], and the coarse space of the pressure solves (PressureCoarseSpace) for bodies of many
+    /// particles: rebuilt every few steps when mayRebuild, otherwise only the particles' cells are found anew.
+    void computeFactors(const StepContext& ctx, const ParticleSet& particles, bool mayRebuild = true);
+    /// The coarse space as last built, and when: a resumed run solves as the uninterrupted one did.
+    void save(ByteWriter& out) const;
+    void restore(ByteReader& in);
     /// Applies the previous step's constant-density pressure, times `scale`, to the velocities: the warm start of
     /// this step's constant-density solve. Its net push on the particles the viscosity moves as one body
     /// (attribute::kViscouslyRigid) is at most their weight over the step: their mass times `support` [m/s], the
@@ -72,6 +77,10 @@ private:
     // bodies' velocities' share of the density rate, sum_k w_ik v_k . x_ik.
     std::vector<Vec3> m_boundarySum;
     std::vector<Real> m_bodyRate;
+    std::vector<Vec3> m_gradientSum;  // G_i: sum_j w_ij x_ij plus the boundary sum
+    PressureCoarseSpace m_coarse;
+    std::uint64_t m_coarseBuilt = 0;          // the step it was built in
+    Eigen::VectorXd m_coarseRhs, m_coarseQ;  // per cell: the restricted gradient, then the cells' pressures; and q
     std::vector<Real>* m_pressure;  // constant-density pressure, warm start of the next step
     std::vector<Real> m_pressureV;  // divergence-free pressure of this step
     std::vector<Real> m_start;      // pressures at the start of a solve
