@@ -52,9 +52,9 @@ struct PressureSettings {
     Real rigidCorrection = 0.5;
     /// Fluid particles from which the projected CG solves also solve exactly for pressures constant over cells of
     /// about 4^3 particles (PressureCoarseSpace): a pressure then crosses a body at once instead of a layer an
-    /// iteration. It pays on bodies many layers thick: on the 50k anchor block 7.5 -> 4.3 products a step, the step
-    /// 10-14 % faster; on the 8k block 5.1 -> 4.1 products, the step within the noise; on the 2.6k buckling sheet no
-    /// fewer products and the step 4-6 % slower (1 thread, docs/benchmarks.md).
+    /// iteration. It pays on bodies many layers thick: on the 50k anchor block 7.5 -> 4.25 products a step, the step
+    /// 10-15 % shorter; on the 8k block 5.05 -> 4.05 products but the step 2-6 % longer; on the 2.6k buckling sheet
+    /// no fewer products and the step 5 % longer (1 thread, docs/benchmarks.md).
     std::int64_t coarseFrom = 20000;
 };
 

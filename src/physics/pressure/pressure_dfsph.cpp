@@ -44,6 +44,7 @@ constexpr Real kRoundOff = 1e-6;
 constexpr Real kCoarseCell = 2;
 constexpr std::uint64_t kCoarseRebuild = 8;
 constexpr int kCoarseExpansions = 2;  // see solveMprgp
+constexpr std::size_t kCoarseBlock = 4096;  // particles a block of the sums by cell
 
 }  // namespace
 
@@ -321,18 +322,34 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     // and where an impact keeps changing which particles hold pressure they run into the bound more often than the
     // diagonal's: a honey block landing at 1 m/s took 215 expansion steps with it against 158 without, 576 products
     // against 481 (test PressureCoarseSpace.ALandingEndsWhereItDoesWithoutInFewerProducts). From a solve's second
-    // expansion on, the diagonal goes on alone: 439 products; the 50k anchor block keeps its 3.50 + 0.75 a step.
+    // expansion on, the diagonal goes on alone: 435 products; the 50k anchor block keeps its 3.50 + 0.75 a step.
     bool coarse = m_coarse.active();
     int expansions = 0;
+    // The sums by cell: each fixed block of particles sums the runs of particles from one cell (they lie in Z order,
+    // so a cell's come together), and the runs are added up in the blocks' order, the same on any thread count.
+    const std::size_t blocks = (n + kCoarseBlock - 1) / kCoarseBlock;
+    m_coarseRuns.resize(blocks);
     auto coarseSolve = [&](bool withQ) {
+        forEachBlock(blocks, [&](std::size_t first, std::size_t last) {
+            for (std::size_t b = first; b < last; ++b) {
+                auto& runs = m_coarseRuns[b];
+                runs.clear();
+                for (std::size_t i = b * kCoarseBlock; i < std::min(n, (b + 1) * kCoarseBlock); ++i) {
+                    const std::uint32_t c = m_coarse.cellOf(i);
+                    if (c == PressureCoarseSpace::kNone || !(pressure[i] > 0)) continue;
+                    if (runs.empty() || runs.back().cell != c) runs.push_back({c, 0, 0});
+                    runs.back().gradient += free(i);
+                    if (withQ) runs.back().q += q[i];
+                }
+            }
+        }, 1);
         m_coarseRhs.setZero(Eigen::Index(m_coarse.cells()));
         if (withQ) m_coarseQ.setZero(Eigen::Index(m_coarse.cells()));
-        for (std::size_t i = 0; i < n; ++i) {
-            const std::uint32_t c = m_coarse.cellOf(i);
-            if (c == PressureCoarseSpace::kNone || !(pressure[i] > 0)) continue;
-            m_coarseRhs[c] += free(i);
-            if (withQ) m_coarseQ[c] += q[i];
-        }
+        for (const auto& runs : m_coarseRuns)
+            for (const CoarseRun& r : runs) {
+                m_coarseRhs[r.cell] += r.gradient;
+                if (withQ) m_coarseQ[r.cell] += r.q;
+            }
         m_coarse.solve(m_coarseRhs);
         m_coarseRhs /= dt2;
     };

@@ -81,6 +81,11 @@ private:
     PressureCoarseSpace m_coarse;
     std::uint64_t m_coarseBuilt = 0;          // the step it was built in
     Eigen::VectorXd m_coarseRhs, m_coarseQ;  // per cell: the restricted gradient, then the cells' pressures; and q
+    struct CoarseRun {
+        std::uint32_t cell;
+        Real gradient, q;
+    };
+    std::vector<std::vector<CoarseRun>> m_coarseRuns;  // per block of particles, its sums by cell
     std::vector<Real>* m_pressure;  // constant-density pressure, warm start of the next step
     std::vector<Real> m_pressureV;  // divergence-free pressure of this step
     std::vector<Real> m_start;      // pressures at the start of a solve
