@@ -51,10 +51,12 @@ struct PressureSettings {
     /// step's worth (Baumgarte's error reduction, as rigid-body contact solvers use) lets it land.
     Real rigidCorrection = 0.5;
     /// Fluid particles from which the projected CG solves also solve exactly for pressures constant over cells of
-    /// about 4^3 particles (PressureCoarseSpace): a pressure then crosses a body at once instead of a layer an
-    /// iteration. It pays on bodies many layers thick: on the 50k anchor block 7.5 -> 4.25 products a step, the step
-    /// 10-15 % shorter; on the 8k block 5.05 -> 4.05 products but the step 2-6 % longer; on the 2.6k buckling sheet
-    /// no fewer products and the step 5 % longer (1 thread, docs/benchmarks.md).
+    /// about 4^3 particles, larger past 4,096 cells (PressureCoarseSpace): a pressure then crosses a body at once
+    /// instead of a layer an iteration. It pays on bodies many layers thick: the 50k anchor block 7.5 -> 4.25 products
+    /// a step, the step 10-15 % shorter (1 thread); a 1M-particle honey blob's impact 27.8 -> 9.5, the step half as
+    /// long (2 threads). Where it pays less than its build: the 8k block 5.05 -> 4.05 products but the step 2-6 %
+    /// longer, the 2.6k buckling sheet the same products and 5 % longer, the default scene at final quality (43k,
+    /// melting into a puddle) 14.6 -> 13.9 and 3-6 % longer (docs/benchmarks.md).
     std::int64_t coarseFrom = 20000;
 };
 

@@ -4,6 +4,7 @@
 
 #include <Eigen/OrderingMethods>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -28,19 +29,26 @@ void PressureCoarseSpace::clear() {
 void PressureCoarseSpace::build(const std::vector<Vec3>& x, const std::vector<Real>& mass,
                                 const NeighbourList& fluid, const sweeps::PairWeights& weights,
                                 const sweeps::Rows& xRows, const std::vector<Vec3>& gradientSum, Real cellSize,
-                                Real support) {
+                                Real support, std::size_t maxCells) {
     if (!(cellSize >= 2 * support)) throw std::logic_error("PressureCoarseSpace: cells narrower than two supports");
     const std::size_t n = x.size();
     clear();
-    if (m_grid.cellSize() != cellSize) m_grid = UniformGrid(cellSize);
-    m_grid.build(x);
+    // Cells grow until there are at most maxCells: the simplicial factorisation's cost grows about as the square of
+    // the cells in three dimensions.
+    for (;;) {
+        if (m_grid.cellSize() != cellSize) m_grid = UniformGrid(cellSize);
+        m_grid.build(x);
+        if (m_grid.cellCount() <= maxCells) break;
+        cellSize *= std::max(1.1, std::cbrt(Real(m_grid.cellCount()) / Real(maxCells)));
+    }
     const std::size_t cells = m_grid.cellCount();
     if (cells < 2) return;  // one cell: the diagonal's own business
     m_cellOf.resize(n);
     const auto& sorted = m_grid.sortedIndices();
     for (std::size_t c = 0; c < cells; ++c) {
         m_coords.push_back(m_grid.cellCoords(c));
-        for (std::size_t s = m_grid.cellBegin(c); s < m_grid.cellBegin(c + 1); ++s) m_cellOf[sorted[s]] = std::uint32_t(c);
+        for (std::size_t s = m_grid.cellBegin(c); s < m_grid.cellBegin(c + 1); ++s)
+            m_cellOf[sorted[s]] = std::uint32_t(c);
     }
 
     // A_c[I, K] = sum_l (sum_{i in I} C_il) . (sum_{k in K} B_lk), with B_ll = C_ll = G_l, B_lj = a_lj and C_jl =
@@ -122,7 +130,8 @@ void PressureCoarseSpace::factor() {
             const auto to = offsetBy(m_coords[r], k);
             const std::int64_t column = m_grid.findCell(to[0], to[1], to[2]);
             if (column < 0 || std::size_t(column) > r) continue;
-            entries.emplace_back(int(r), int(column), Real(0.5) * (value + m_rows[std::size_t(column)][std::size_t(26 - k)]));
+            const Real mirror = m_rows[std::size_t(column)][std::size_t(26 - k)];
+            entries.emplace_back(int(r), int(column), Real(0.5) * (value + mirror));
         }
     const auto size = static_cast<Eigen::Index>(cells);
     Eigen::SparseMatrix<Real> a(size, size);
@@ -180,7 +189,7 @@ void PressureCoarseSpace::restore(ByteReader& in) {
     m_rows.resize(cells);
     for (std::size_t c = 0; c < cells; ++c) {
         m_coords.push_back(m_grid.cellCoords(c));
-        if (m_coords[c][0] != coords[3 * c] || m_coords[c][1] != coords[3 * c + 1] || m_coords[c][2] != coords[3 * c + 2])
+        if (!std::equal(m_coords[c].begin(), m_coords[c].end(), coords.begin() + std::ptrdiff_t(3 * c)))
             throw std::runtime_error("its pressure coarse space's cells are out of order");
         std::copy_n(rows.begin() + std::ptrdiff_t(27 * c), 27, m_rows[c].begin());
     }

@@ -24,11 +24,12 @@ public:
     static constexpr std::uint32_t kNone = ~std::uint32_t(0);
 
     /// Cells of side cellSize, at least two supports (then two neighbours' neighbours lie in the same or adjacent
-    /// cells); the pushes those of the pressure sweeps (pair weights w in the order of the fluid lists, positions as
-    /// rows, G from gradientSum). Throws std::runtime_error where the coarse system cannot be factored (a non-finite
-    /// weight).
-    void build(const std::vector<Vec3>& x, const std::vector<Real>& mass, const NeighbourList& fluid, const sweeps::PairWeights& weights,
-               const sweeps::Rows& xRows, const std::vector<Vec3>& gradientSum, Real cellSize, Real support);
+    /// cells), larger where that would make more than maxCells; the pushes those of the pressure sweeps (pair weights
+    /// w in the order of the fluid lists, positions as rows, G from gradientSum). Throws std::runtime_error where the
+    /// coarse system cannot be factored (a non-finite weight).
+    void build(const std::vector<Vec3>& x, const std::vector<Real>& mass, const NeighbourList& fluid,
+               const sweeps::PairWeights& weights, const sweeps::Rows& xRows, const std::vector<Vec3>& gradientSum,
+               Real cellSize, Real support, std::size_t maxCells);
     /// The particles' cells anew, for the system of the last build (a preconditioner need not follow every step):
     /// particles outside its cells get none.
     void assign(const std::vector<Vec3>& x);

@@ -42,6 +42,10 @@ constexpr Real kRoundOff = 1e-6;
 // decides how fast a solve converges, not where it ends. On the 50k anchor block, rebuilt every 8 steps: 3.55 + 0.75
 // constant-density and divergence-free products a step; every step: 3.50 + 0.80, but the build cost what they saved.
 constexpr Real kCoarseCell = 2;
+// At most this many cells: the factorisation's cost grows about as their square. On a 1M-particle honey blob's impact
+// (2 threads), 16,000 cells of two supports: 4.0 + 1.0 products a step, the step 1,526 ms, a fifth of it factoring;
+// at most 8,192 / 4,096 / 2,048 cells: 7.4 + 1.2 / 8.4 + 1.1 / 20.9 + 1.3 products, 1,699 / 1,148 / 1,625 ms.
+constexpr std::size_t kCoarseMaxCells = 4096;
 constexpr std::uint64_t kCoarseRebuild = 8;
 constexpr int kCoarseExpansions = 2;  // see solveMprgp
 constexpr std::size_t kCoarseBlock = 4096;  // particles a block of the sums by cell
@@ -132,7 +136,7 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
         m_coarse.clear();
     } else if (mayRebuild && (!m_coarse.active() || ctx.step >= m_coarseBuilt + kCoarseRebuild)) {
         const Real h = ctx.kernel.supportRadius();
-        m_coarse.build(x, m, f, m_weights, ctx.positionRows, m_gradientSum, kCoarseCell * h, h);
+        m_coarse.build(x, m, f, m_weights, ctx.positionRows, m_gradientSum, kCoarseCell * h, h, kCoarseMaxCells);
         m_coarseBuilt = ctx.step;
     } else {
         m_coarse.assign(x);

@@ -40,7 +40,8 @@ private:
     // it stops when the mean complementarity residual relative to rho_0 is below the solve's tolerance. Returns the
     // iterations (products with the system).
     template <class Target>
-    std::size_t solve(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure, Target target);
+    std::size_t solve(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
+                      Target target);
     template <class Target>
     std::size_t solveMprgp(Solve which, StepContext& ctx, ParticleSet& particles, std::vector<Real>& pressure,
                            Target target);
