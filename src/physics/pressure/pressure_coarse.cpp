@@ -74,8 +74,8 @@ void PressureCoarseSpace::build(const std::vector<Vec3>& x, const std::vector<Re
                 around[std::size_t(k)] = g < 0 ? kNone : std::uint32_t(g);
             }
         }
-        // The neighbours come cell by cell of the fluid grid, each within one of these cells: the pushes are summed
-        // over runs from the same cell, each run added where it ends.
+        // The neighbours come cell by cell of the fluid grid, so mostly in runs from one of these cells: the pushes
+        // are summed over each run and added to its cell's slot where the run ends.
         std::uint32_t touched = 0;  // a bit per slot
         int current = 13;
         Vec3 runB = gradientSum[l], runC = gradientSum[l];
@@ -137,9 +137,11 @@ void PressureCoarseSpace::factor() {
     Eigen::SparseMatrix<Real> a(size, size);
     a.setFromTriplets(entries.begin(), entries.end());
     m_factor.compute(a);
-    if (m_factor.info() != Eigen::Success)
+    if (m_factor.info() != Eigen::Success) {
+        clear();
         throw std::runtime_error("the pressure coarse space could not be factored (a non-finite pair weight?); lower "
                                  "simulation.time_step.max");
+    }
 }
 
 void PressureCoarseSpace::assign(const std::vector<Vec3>& x) {
@@ -173,9 +175,11 @@ void PressureCoarseSpace::restore(ByteReader& in) {
     const std::size_t cells = coords.size() / 3;
     if (!(cellSize > 0) || !std::isfinite(cellSize) || coords.size() != 3 * cells || rows.size() != 27 * cells)
         throw std::runtime_error("its pressure coarse space is malformed");
-    clear();
-    if (cells == 0) return;
-    // The grid from the cells' centres: the same cells, so the same order.
+    if (cells == 0) {
+        clear();
+        return;
+    }
+    // The grid from the cells' centres: the same cells, so the same order. Checked before anything is replaced.
     std::vector<Vec3> centres(cells);
     for (std::size_t c = 0; c < cells; ++c)
         for (int a = 0; a < 3; ++a) {
@@ -183,14 +187,17 @@ void PressureCoarseSpace::restore(ByteReader& in) {
                 throw std::runtime_error("its pressure coarse space has a cell out of range");
             centres[c][a] = (Real(coords[3 * c + std::size_t(a)]) + Real(0.5)) * cellSize;
         }
-    m_grid = UniformGrid(cellSize);
-    m_grid.build(centres);
-    if (m_grid.cellCount() != cells) throw std::runtime_error("its pressure coarse space repeats a cell");
+    UniformGrid grid(cellSize);
+    grid.build(centres);
+    if (grid.cellCount() != cells) throw std::runtime_error("its pressure coarse space repeats a cell");
+    for (std::size_t c = 0; c < cells; ++c)
+        if (!std::equal(grid.cellCoords(c).begin(), grid.cellCoords(c).end(), coords.begin() + std::ptrdiff_t(3 * c)))
+            throw std::runtime_error("its pressure coarse space's cells are out of order");
+    clear();
+    m_grid = std::move(grid);
     m_rows.resize(cells);
     for (std::size_t c = 0; c < cells; ++c) {
         m_coords.push_back(m_grid.cellCoords(c));
-        if (!std::equal(m_coords[c].begin(), m_coords[c].end(), coords.begin() + std::ptrdiff_t(3 * c)))
-            throw std::runtime_error("its pressure coarse space's cells are out of order");
         std::copy_n(rows.begin() + std::ptrdiff_t(27 * c), 27, m_rows[c].begin());
     }
     factor();
