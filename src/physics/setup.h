@@ -56,8 +56,9 @@ struct PressureSettings {
     /// a step, the step 10-15 % shorter (1 thread); a 1M-particle honey blob's impact 27.8 -> 9.5, the step half as
     /// long (2 threads). Where it pays less than its build: the 8k block 5.05 -> 4.05 products but the step 2-6 %
     /// longer, the 2.6k buckling sheet the same products and 5 % longer, the default scene at final quality (43k,
-    /// melting into a puddle) 14.6 -> 13.9 and 3-6 % longer (docs/benchmarks.md).
-    std::int64_t coarseFrom = 20000;
+    /// melting into a puddle) 14.6 -> 13.9 and 3-6 % longer (docs/benchmarks.md). The default lies between the
+    /// largest measured fluid it slowed (43k) and the smallest it sped up (50.6k).
+    std::int64_t coarseFrom = 50000;
 };
 
 /// Where the viscosity solve sits in a step (see simulation.h).
