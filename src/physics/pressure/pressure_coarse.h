@@ -50,7 +50,7 @@ public:
     void restore(ByteReader& in);
 
 private:
-    // Numbers the grid's cells (all occupied) and factors the symmetric part of m_rows.
+    // Factors the symmetric part of m_rows; a failure leaves no system.
     void factor();
 
     UniformGrid m_grid{1};

@@ -39,8 +39,9 @@ constexpr Real kRoundOff = 1e-6;
 
 // The coarse space (PressureSettings::coarseFrom): cells of two kernel supports, about 4^3 particles, the smallest its
 // build allows. The build costs several pressure products, so it is repeated only every few steps: a preconditioner
-// decides how fast a solve converges, not where it ends. On the 50k anchor block, rebuilt every 8 steps: 3.55 + 0.75
-// constant-density and divergence-free products a step; every step: 3.50 + 0.80, but the build cost what they saved.
+// decides how fast a solve converges, not where it ends. On the 50k anchor block, rebuilt every 8 steps: 3.50 + 0.75
+// constant-density and divergence-free products a step; rebuilt every step, about as many, but the build cost what
+// they saved.
 constexpr Real kCoarseCell = 2;
 // At most this many cells: the factorisation's cost grows about as their square. On a 1M-particle honey blob's impact
 // (2 threads), 16,000 cells of two supports: 4.0 + 1.0 products a step, the step 1,526 ms, a fifth of it factoring;
