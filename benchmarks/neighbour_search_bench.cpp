@@ -1,5 +1,5 @@
 // Neighbour search cost: grid build + compressed lists for fluid-fluid pairs, at 100k and 1M particles on 1
-// and 2 threads, with particles in Z order (as the simulator keeps them) and shuffled (no reordering).
+// and 2 threads, with particles in the grid's cell order (as the simulator keeps them) and shuffled (no reordering).
 // Run: build/benchmarks/neighbour_search_bench --benchmark_counters_tabular=true
 
 #include "core/kernels.h"

@@ -1,5 +1,5 @@
 // The solvers' inner loops on their own: one viscous product (I - dt A) v and one pressure product (a velocity change
-// and a density rate) per iteration, on a jittered lattice block in Z order, at 8k, 50k, 200k and 1M particles on 1
+// and a density rate) per iteration, on a jittered lattice block in the grid's cell order, at 8k, 50k, 200k and 1M particles on 1
 // and 2 threads; beside them the machine's streaming bandwidth (a triad over 256 MiB arrays), so that each product's
 // cost can be set against the time its bytes take to move; and the viscous product alone on input rows that no thread
 // rewrites between passes (`viscousKeptRows`), which shows what two threads lose to each other's fresh writes.
@@ -29,7 +29,7 @@ struct Block {
     sweeps::PairWeights weight;  // one per pair
 };
 
-// A jittered lattice block of about n particles in Z order, its neighbour lists and a weight per pair.
+// A jittered lattice block of about n particles in the grid's cell order (as the simulator keeps them), its neighbour lists and a weight per pair.
 Block block(std::size_t n) {
     const int side = int(std::round(std::cbrt(Real(n))));
     std::mt19937_64 rng(42);
@@ -67,7 +67,7 @@ void setCounters(benchmark::State& state, const Block& b, double bytesPerIterati
 }
 
 // Bytes a product moves at least once: the lists (offsets, indices), the pair weights, the input and output vectors
-// and the positions; neighbours' values are assumed to come from cache (the particles are in Z order).
+// and the positions; neighbours' values are assumed to come from cache (the particles are in the grid's cell order).
 double productBytes(const Block& b, double perParticleIn, double perParticleOut) {
     return double(b.x.size()) * (8 + 24 + perParticleIn + perParticleOut) +
            double(b.pairs.pairs()) * double(4 + sizeof(sweeps::PairWeight));
@@ -84,7 +84,7 @@ void viscous(benchmark::State& state) {
             sweeps::toRows(begin, end, b.v.data(), in.data());
         });
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
-            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.xRows.data(), in.data(), 1e-3,
+            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, {}, b.xRows.data(), in.data(), 1e-3,
                                    out.data());
         });
         benchmark::DoNotOptimize(out.data());
@@ -100,7 +100,7 @@ void viscousKeptRows(benchmark::State& state) {
     std::vector<Vec3> out(b.x.size());
     for (auto _ : state) {
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
-            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.xRows.data(), b.vRows.data(),
+            sweeps::viscousProduct(begin, end, {&b.pairs, b.weight.data()}, {}, b.xRows.data(), b.vRows.data(),
                                    1e-3, out.data());
         });
         benchmark::DoNotOptimize(out.data());
@@ -117,7 +117,7 @@ void pressure(benchmark::State& state) {
     for (auto _ : state) {
         // as the solver makes them: the velocity change, its rows, the rate
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
-            sweeps::pressureChange(begin, end, {&b.pairs, b.weight.data()}, nullptr, b.xRows.data(), s.data(), 1e-3,
+            sweeps::pressureChange(begin, end, {&b.pairs, b.weight.data()}, {}, b.xRows.data(), s.data(), 1e-3,
                                    dv.data());
         });
         forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {

@@ -4,6 +4,7 @@
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <cmath>
@@ -121,15 +122,35 @@ void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
     }
 }
 
-UniformGrid::UniformGrid(Real cellSize) : m_cellSize(cellSize) {
+UniformGrid::UniformGrid(Real cellSize, std::size_t slabPoints) : m_cellSize(cellSize), m_slabPoints(slabPoints) {
     if (!(cellSize > 0) || !std::isfinite(cellSize))
         throw std::invalid_argument("UniformGrid: cell size must be positive and finite");
+    if (slabPoints > std::size_t(1) << 40) throw std::invalid_argument("UniformGrid: slabPoints above 2^40");
 }
 
 void UniformGrid::build(const std::vector<Vec3>& x) {
     const std::size_t n = x.size();
     if (n >= std::size_t(UINT32_MAX)) throw std::runtime_error("neighbour search: more than 4 billion points");
     const Real inv = 1 / m_cellSize;
+    // The box of the points' cells, for the order; points that are not finite or too far are left to the key pass,
+    // which names them.
+    using Box = std::pair<Vec3, Vec3>;
+    const Real big = std::numeric_limits<Real>::max();
+    const Box box = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n, 4096), Box(Vec3::Constant(big), Vec3::Constant(-big)),
+        [&](const auto& r, Box b) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                const Vec3 c = (x[i] * inv).array().floor();
+                if (!c.allFinite() || c.cwiseAbs().maxCoeff() > Real(kMaxCell)) continue;
+                b.first = b.first.cwiseMin(c), b.second = b.second.cwiseMax(c);
+            }
+            return b;
+        },
+        [](const Box& a, const Box& b) { return Box(a.first.cwiseMin(b.first), a.second.cwiseMax(b.second)); });
+    m_rowOrder = false;
+    if (box.first.x() <= box.second.x())
+        chooseOrder(n, {std::int64_t(box.first.x()), std::int64_t(box.first.y()), std::int64_t(box.first.z())},
+                    {std::int64_t(box.second.x()), std::int64_t(box.second.y()), std::int64_t(box.second.z())});
 
     auto& keyed = m_keyed;
     keyed.resize(n);
@@ -140,8 +161,7 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
                 throw std::runtime_error("neighbour search: point " + std::to_string(i) +
                                          (x[i].allFinite() ? " lies too far from the origin for the grid"
                                                            : " has a non-finite position"));
-            keyed[i] = {mortonKey(std::int64_t(c.x()), std::int64_t(c.y()), std::int64_t(c.z())),
-                        std::uint32_t(i)};
+            keyed[i] = {key(std::int64_t(c.x()), std::int64_t(c.y()), std::int64_t(c.z())), std::uint32_t(i)};
         }
     });
     // Indices ascend in keyed, so a stable sort by key gives the (key, index) order, the same for any thread count.
@@ -206,6 +226,28 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     }
 }
 
+void UniformGrid::chooseOrder(std::size_t n, const std::array<std::int64_t, 3>& lo,
+                              const std::array<std::int64_t, 3>& hi) {
+    std::array<int, 3> axes{0, 1, 2};  // fastest to slowest: the longest side slowest, so that slabs are small
+    for (int a = 0; a < 3; ++a) m_rowSize[std::size_t(a)] = hi[std::size_t(a)] - lo[std::size_t(a)] + 1;
+    std::stable_sort(axes.begin(), axes.end(),
+                     [&](int a, int b) { return m_rowSize[std::size_t(a)] < m_rowSize[std::size_t(b)]; });
+    m_rowOrder = 3 * n <= m_slabPoints * std::size_t(m_rowSize[std::size_t(axes[2])]);
+    if (!m_rowOrder) return;
+    m_rowMin = lo;
+    int shift = 0;
+    for (int a : axes) {
+        m_rowShift[std::size_t(a)] = shift;
+        while (std::int64_t(1) << (shift - m_rowShift[std::size_t(a)]) < m_rowSize[std::size_t(a)]) ++shift;
+    }
+}
+
+std::uint64_t UniformGrid::key(std::int64_t cx, std::int64_t cy, std::int64_t cz) const {
+    if (!m_rowOrder) return mortonKey(cx, cy, cz);
+    return std::uint64_t(cx - m_rowMin[0]) << m_rowShift[0] | std::uint64_t(cy - m_rowMin[1]) << m_rowShift[1] |
+           std::uint64_t(cz - m_rowMin[2]) << m_rowShift[2];
+}
+
 void UniformGrid::releaseWorkingMemory() {
     std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(m_keyed);
     std::vector<std::pair<std::uint64_t, std::uint32_t>>().swap(m_keyedScratch);
@@ -226,8 +268,14 @@ std::int64_t UniformGrid::findCell(std::int64_t cx, std::int64_t cy, std::int64_
             return -1;
         return std::int64_t(m_denseCells[std::size_t((iz * m_denseSize[1] + iy) * m_denseSize[0] + ix)]) - 1;
     }
-    if (std::abs(cx) > kMaxCell + 1 || std::abs(cy) > kMaxCell + 1 || std::abs(cz) > kMaxCell + 1) return -1;
-    const std::uint64_t key = mortonKey(cx, cy, cz);
+    if (m_rowOrder) {
+        const std::int64_t c[3] = {cx, cy, cz};
+        for (std::size_t a = 0; a < 3; ++a)
+            if (c[a] < m_rowMin[a] || c[a] >= m_rowMin[a] + m_rowSize[a]) return -1;
+    } else if (std::abs(cx) > kMaxCell + 1 || std::abs(cy) > kMaxCell + 1 || std::abs(cz) > kMaxCell + 1) {
+        return -1;
+    }
+    const std::uint64_t key = this->key(cx, cy, cz);
     const std::uint64_t mask = (std::uint64_t(1) << m_tableBits) - 1;
     for (std::uint64_t slot = hashSlot(key, m_tableBits);; slot = (slot + 1) & mask) {
         if (m_tableKeys[slot] == key) return m_tableCells[slot];

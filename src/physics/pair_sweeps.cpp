@@ -1,8 +1,10 @@
 #include "physics/pair_sweeps.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 
-#if defined(__AVX2__)
+#if defined(__AVX2__) && defined(__FMA__)
 #include <immintrin.h>
 #endif
 
@@ -13,7 +15,7 @@ namespace {
 // Four lanes of doubles: a group of four pairs' values of one coordinate, or one pair's coordinates. Gathering
 // instructions were tried for the neighbours' values and ran at half the speed of the scalar loops on AMD's cores;
 // aligned row loads (and a transpose) do not.
-#if defined(__AVX2__)
+#if defined(__AVX2__) && defined(__FMA__)
 struct Lanes {
     __m256d v;
 };
@@ -45,6 +47,8 @@ inline Lanes storeWeights(Lanes a, PairWeight* w, int count) {
 }
 inline Lanes broadcast(Real a) { return {_mm256_set1_pd(a)}; }
 inline Lanes load(const Row& r) { return {_mm256_load_pd(r.data())}; }
+// a * b + c, rounded once (asked for by name: the build lets the compiler fuse nothing on its own)
+inline Lanes fma(Lanes a, Lanes b, Lanes c) { return {_mm256_fmadd_pd(a.v, b.v, c.v)}; }
 // w[0, count), zero beyond: a tail never reads past its particle's pairs.
 inline Lanes loadWeights(const PairWeight* w, int count) {
     if (count == 4) return {_mm256_cvtps_pd(_mm_loadu_ps(w))};
@@ -96,6 +100,10 @@ inline Lanes storeWeights(Lanes a, PairWeight* w, int count) {
     return out;
 }
 inline Lanes broadcast(Real a) { return {{a, a, a, a}}; }
+inline Lanes fma(Lanes a, Lanes b, Lanes c) {
+    return {{std::fma(a.v[0], b.v[0], c.v[0]), std::fma(a.v[1], b.v[1], c.v[1]), std::fma(a.v[2], b.v[2], c.v[2]),
+             std::fma(a.v[3], b.v[3], c.v[3])}};
+}
 inline Lanes load(const Row& r) { return {{r[0], r[1], r[2], r[3]}}; }
 inline Lanes loadWeights(const PairWeight* w, int count) {
     Lanes out = zero();
@@ -149,9 +157,12 @@ inline void forEachGroup(std::size_t i, const NeighbourList& list, const Row* co
 
 // The viscous product for N inputs in one pass over the pairs (the pairs' geometry is read once for all of them).
 template <int N, bool Ahead>
-void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const BoundaryBlocks& boundary, const Row* x,
                        const Row* const (&in)[N], Real dt, Vec3* const (&out)[N]) {
     const Row* rows[N + 1] = {x};
+    // the next particle with a boundary block, from the first at or after `begin`
+    std::size_t wall = std::size_t(std::lower_bound(boundary.particle, boundary.particle + boundary.count,
+                                                    std::uint32_t(begin)) - boundary.particle);
     for (int c = 0; c < N; ++c) rows[c + 1] = in[c];
     for (std::size_t i = begin; i < end; ++i) {
         const Lanes xi[3] = {broadcast(x[i][0]), broadcast(x[i][1]), broadcast(x[i][2])};
@@ -164,32 +175,34 @@ void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Ma
             const Lanes d0 = xi[0] - r[0][0], d1 = xi[1] - r[0][1], d2 = xi[2] - r[0][2];
             for (int c = 0; c < N; ++c) {
                 const Lanes (&u)[4] = r[c + 1];
-                const Lanes s = k * ((d0 * (ui[c][0] - u[0]) + d1 * (ui[c][1] - u[1])) + d2 * (ui[c][2] - u[2]));
-                a[c][0] = a[c][0] + s * d0;
-                a[c][1] = a[c][1] + s * d1;
-                a[c][2] = a[c][2] + s * d2;
+                const Lanes s = k * fma(d2, ui[c][2] - u[2], fma(d1, ui[c][1] - u[1], d0 * (ui[c][0] - u[0])));
+                a[c][0] = fma(s, d0, a[c][0]);
+                a[c][1] = fma(s, d1, a[c][1]);
+                a[c][2] = fma(s, d2, a[c][2]);
             }
         });
+        const bool walled = wall < boundary.count && boundary.particle[wall] == i;
         for (int c = 0; c < N; ++c) {
             const Vec3 v(in[c][i][0], in[c][i][1], in[c][i][2]);
             Vec3 o = v - dt * Vec3(sum(a[c][0]), sum(a[c][1]), sum(a[c][2]));
-            if (boundaryBlock) {
+            if (walled) {
                 // written out: Eigen's matrix product fuses multiply-adds where the target has them
-                const Mat3& b = boundaryBlock[i];
+                const Mat3& b = boundary.block[wall];
                 for (int r = 0; r < 3; ++r) o[r] += (b(r, 0) * v[0] + b(r, 1) * v[1]) + b(r, 2) * v[2];
             }
             out[c][i] = o;
         }
+        wall += walled;
     }
 }
 
 template <int N>
-void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+void viscousProductsOf(std::size_t begin, std::size_t end, Pairs fluid, const BoundaryBlocks& boundary, const Row* x,
                        const Row* const (&in)[N], Real dt, Vec3* const (&out)[N]) {
     if (prefetches(*fluid.list, N + 1))
-        viscousProductsOf<N, true>(begin, end, fluid, boundaryBlock, x, in, dt, out);
+        viscousProductsOf<N, true>(begin, end, fluid, boundary, x, in, dt, out);
     else
-        viscousProductsOf<N, false>(begin, end, fluid, boundaryBlock, x, in, dt, out);
+        viscousProductsOf<N, false>(begin, end, fluid, boundary, x, in, dt, out);
 }
 
 // Prefetches a[j] and b[j] for the neighbour j of pair p + kAhead, where the lists' `pairs` reach that far.
@@ -211,13 +224,18 @@ void densityRateOf(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* 
     const std::uint64_t pairs = fluid.list->pairs();
     for (std::size_t i = begin; i < end; ++i) {
         const Lanes xi = load(x[i]), ui = load(u[i]);
-        Lanes a = zero();  // the fourth lane stays zero: the rows' fourth values are
-        for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
+        // The fourth lanes stay zero: the rows' fourth values are. Even and odd pairs go to two sums, so that a pair's
+        // add need not wait for the one before it.
+        Lanes a = zero(), b = zero();
+        auto term = [&](std::uint64_t p, Lanes sum) {
             if constexpr (Ahead) prefetchAhead(idx, p, pairs, x, u);
             const std::uint32_t j = idx[p];
-            a = a + broadcast(Real(fluid.weight[p])) * ((ui - load(u[j])) * (xi - load(x[j])));
-        }
-        const Row l = row(a);
+            return fma(broadcast(Real(fluid.weight[p])), (ui - load(u[j])) * (xi - load(x[j])), sum);
+        };
+        std::uint64_t p = off[i];
+        for (; p + 1 < off[i + 1]; p += 2) a = term(p, a), b = term(p + 1, b);
+        if (p < off[i + 1]) a = term(p, a);
+        const Row l = row(a + b);
         Real r = (l[0] + l[1]) + l[2];
         if (boundarySum)
             r += (u[i][0] * boundarySum[i].x() + u[i][1] * boundarySum[i].y()) + u[i][2] * boundarySum[i].z();
@@ -234,13 +252,16 @@ void pressureChangeOf(std::size_t begin, std::size_t end, Pairs fluid, const Vec
     const std::uint64_t pairs = fluid.list->pairs();
     for (std::size_t i = begin; i < end; ++i) {
         const Lanes xi = load(x[i]), si = broadcast(s[i]);
-        Lanes a = zero();
-        for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
+        Lanes a = zero(), b = zero();  // even and odd pairs, as in densityRate
+        auto term = [&](std::uint64_t p, Lanes sum) {
             if constexpr (Ahead) prefetchAhead(idx, p, pairs, x, s);
             const std::uint32_t j = idx[p];
-            a = a + (broadcast(Real(fluid.weight[p])) * (si + broadcast(s[j]))) * (xi - load(x[j]));
-        }
-        const Row l = row(a);
+            return fma(broadcast(Real(fluid.weight[p])) * (si + broadcast(s[j])), xi - load(x[j]), sum);
+        };
+        std::uint64_t p = off[i];
+        for (; p + 1 < off[i + 1]; p += 2) a = term(p, a), b = term(p + 1, b);
+        if (p < off[i + 1]) a = term(p, a);
+        const Row l = row(a + b);
         Vec3 total(l[0], l[1], l[2]);
         if (boundarySum) total += s[i] * boundarySum[i];
         dv[i] = -dt * total;
@@ -258,25 +279,25 @@ void toRows(std::size_t begin, std::size_t end, const Vec3* v, Row* rows) {
     for (std::size_t i = begin; i < end; ++i) rows[i] = Row(v[i].x(), v[i].y(), v[i].z(), 0);
 }
 
-void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const BoundaryBlocks& boundary, const Row* x,
                     const Row* in, Real dt, Vec3* out) {
     const Row* const inputs[1] = {in};
     Vec3* const outputs[1] = {out};
-    viscousProductsOf<1>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
+    viscousProductsOf<1>(begin, end, fluid, boundary, x, inputs, dt, outputs);
 }
 
-void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const BoundaryBlocks& boundary, const Row* x,
                      const Row* in1, const Row* in2, Real dt, Vec3* out1, Vec3* out2) {
     const Row* const inputs[2] = {in1, in2};
     Vec3* const outputs[2] = {out1, out2};
-    viscousProductsOf<2>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
+    viscousProductsOf<2>(begin, end, fluid, boundary, x, inputs, dt, outputs);
 }
 
-void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const BoundaryBlocks& boundary, const Row* x,
                      const Row* in1, const Row* in2, const Row* in3, Real dt, Vec3* out1, Vec3* out2, Vec3* out3) {
     const Row* const inputs[3] = {in1, in2, in3};
     Vec3* const outputs[3] = {out1, out2, out3};
-    viscousProductsOf<3>(begin, end, fluid, boundaryBlock, x, inputs, dt, outputs);
+    viscousProductsOf<3>(begin, end, fluid, boundary, x, inputs, dt, outputs);
 }
 
 void squaredDistances(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x, Real* d2) {

@@ -6,14 +6,16 @@
 //
 // The sweeps read positions and inputs as Rows (four doubles, 32-byte aligned): one aligned load per neighbour brings
 // its row. The viscous product takes four pairs at a time, their rows transposed into one vector per coordinate; the
-// pressure sweeps one pair per vector, its lanes the coordinates. Vectors are AVX2's in the default build; elsewhere
-// the same four lanes in plain C++, which round alike, so that both builds give the same bytes. A particle's sum is
+// pressure sweeps one pair per vector, its lanes the coordinates. Vectors are AVX2's in the default build, with fused
+// multiply-adds where a sum takes a product; elsewhere the same four lanes in plain C++ (std::fma for those), which
+// round alike, so that both builds give the same bytes. A particle's sum is
 // always taken in the same order, so results do not depend on the thread count.
 
 #include "core/neighbour_search.h"
 #include "core/types.h"
 
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 namespace ganache::sweeps {
@@ -40,18 +42,27 @@ struct Pairs {
     const PairWeight* weight = nullptr;
 };
 
+/// The boundary's parts of the viscous operator's diagonal blocks, B_k = -dt sum_q kb_q x_ik x_ik^T, summed once a
+/// step (the boundary stands still during a solve), for the particles that have one: particle[k] ascending, block[k]
+/// its B. Only a fluid's layers next to a wall have one; a block for every particle was 72 bytes each product streamed
+/// for the few.
+struct BoundaryBlocks {
+    const std::uint32_t* particle = nullptr;
+    const Mat3* block = nullptr;
+    std::size_t count = 0;
+};
+
 /// For i in [begin, end): out_i = in_i - dt sum_p k_p (x_ij . (in_i - in_j)) x_ij + B_i in_i, the product
-/// (I - dt A) in of the implicit viscosity [WKBB18 Eq. 7-11] with the bodies' velocities left out. B_i =
-/// -dt sum_q kb_q x_ik x_ik^T is the boundary's part of particle i's diagonal block, summed once a step: the boundary
-/// stands still during a solve (boundaryBlock null: no boundary).
-void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+/// (I - dt A) in of the implicit viscosity [WKBB18 Eq. 7-11] with the bodies' velocities left out, B_i the boundary's
+/// part of particle i's diagonal block (zero for a particle not in `boundary`).
+void viscousProduct(std::size_t begin, std::size_t end, Pairs fluid, const BoundaryBlocks& boundary, const Row* x,
                     const Row* in, Real dt, Vec3* out);
 
 /// viscousProduct for two inputs at once (one pass over the pairs): out1 = (I - dt A) in1, out2 = (I - dt A) in2.
-void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const BoundaryBlocks& boundary, const Row* x,
                      const Row* in1, const Row* in2, Real dt, Vec3* out1, Vec3* out2);
 /// The same for three inputs.
-void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const Mat3* boundaryBlock, const Row* x,
+void viscousProducts(std::size_t begin, std::size_t end, Pairs fluid, const BoundaryBlocks& boundary, const Row* x,
                      const Row* in1, const Row* in2, const Row* in3, Real dt, Vec3* out1, Vec3* out2, Vec3* out3);
 
 /// For the pairs p of particles [begin, end): d2[p - list.first(begin)] = |x_ij|^2.

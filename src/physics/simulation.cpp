@@ -15,7 +15,7 @@ namespace ganache {
 
 namespace {
 
-// Reorder the particles along the grid's Z curve this often, to keep neighbours close in memory.
+// Reorder the particles in the grid's cell order this often, to keep neighbours close in memory.
 constexpr std::size_t kReorderInterval = 50;
 
 }  // namespace

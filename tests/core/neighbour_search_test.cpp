@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <random>
 #include <set>
+#include <tuple>
+#include <utility>
 
 using namespace ganache;
 
@@ -157,6 +159,42 @@ TEST(NeighbourSearch, SortedOrderIsAPermutationGroupedByCell) {
         for (std::size_t s = grid.cellBegin(c); s < grid.cellBegin(c + 1); ++s) {
             const Vec3 cell = (x[perm[s]] / 0.1).array().floor();
             EXPECT_EQ(cell, Vec3(cc[0], cc[1], cc[2]));
+        }
+    }
+}
+
+TEST(NeighbourSearch, BothCellOrdersMatchBruteForce) {
+    // Row order where three slabs of cells hold few points, Z order elsewhere: each is forced here on a fluid and a
+    // boundary in different orders, and on points either side of the origin.
+    const auto fluid = randomPoints(2500, Vec3(-0.3, -0.1, -0.2), Vec3(0.3, 0.1, 0.25), 10);
+    const auto boundary = randomPoints(900, Vec3(-0.4, -0.2, -0.3), Vec3(0.4, -0.05, 0.3), 11);
+    const Real radius = 0.06;
+    const std::size_t zOrder = 0, rowOrder = std::size_t(1) << 40;
+    for (const auto& [fluidSlab, boundarySlab] : {std::pair{rowOrder, zOrder}, std::pair{zOrder, rowOrder}}) {
+        UniformGrid fg(radius, fluidSlab), bg(radius, boundarySlab);
+        fg.build(fluid);
+        bg.build(boundary);
+        EXPECT_EQ(fg.rowOrder(), fluidSlab == rowOrder);
+        EXPECT_EQ(bg.rowOrder(), boundarySlab == rowOrder);
+        NeighbourList ff, fb;
+        findNeighbours(fg, fluid, fg, fluid, radius, true, ff);
+        findNeighbours(fg, fluid, bg, boundary, radius, false, fb);
+        expectSameAsBruteForce(ff, bruteForce(fluid, fluid, radius, true));
+        expectSameAsBruteForce(fb, bruteForce(fluid, boundary, radius, false));
+        for (const UniformGrid* g : {&fg, &bg}) {
+            for (std::size_t c = 0; c < g->cellCount(); ++c) {
+                const auto& cc = g->cellCoords(c);
+                ASSERT_EQ(g->findCell(cc[0], cc[1], cc[2]), std::int64_t(c));
+            }
+            EXPECT_EQ(g->findCell(1000, 0, 0), -1);  // outside the box the row keys cover
+            EXPECT_EQ(g->findCell(0, -1000, 0), -1);
+        }
+        // In row order the cells run along the shortest side fastest and along the longest (x here) slowest.
+        const UniformGrid& rows = fg.rowOrder() ? fg : bg;
+        for (std::size_t c = 1; c < rows.cellCount(); ++c) {
+            const auto& a = rows.cellCoords(c - 1);
+            const auto& b = rows.cellCoords(c);
+            EXPECT_TRUE(std::tie(a[0], a[2], a[1]) < std::tie(b[0], b[2], b[1])) << "cell " << c;
         }
     }
 }

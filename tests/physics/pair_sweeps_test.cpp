@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <random>
+#include <utility>
 
 namespace ganache {
 namespace {
@@ -14,11 +15,15 @@ struct Field {
     std::vector<Vec3> x, u;
     std::vector<Real> s;
     sweeps::PairWeights weight;
-    std::vector<Mat3> block;
+    std::vector<Mat3> block;              // every particle's boundary block, zero where it has none
+    std::vector<std::uint32_t> walled;    // the particles with one
+    std::vector<Mat3> walledBlock;        // their blocks
     std::vector<Vec3> boundarySum;
     std::vector<Real> bodyRate;
     NeighbourList list;
     sweeps::Rows xRows, uRows;
+
+    sweeps::BoundaryBlocks boundary() const { return {walled.data(), walledBlock.data(), walled.size()}; }
 };
 
 // n particles in a unit box; particle i has i % 9 neighbours (0 to 8: every tail length twice), always including the
@@ -31,8 +36,10 @@ Field field(std::size_t n) {
         f.x.emplace_back(unit(rng), unit(rng), unit(rng));
         f.u.emplace_back(unit(rng), unit(rng), unit(rng));
         f.s.push_back(1 + unit(rng));
+        // two particles in three next to a wall, in runs that start and end anywhere
         const Mat3 a = Mat3::Random();
-        f.block.push_back(a + a.transpose());
+        f.block.push_back(i % 3 == 1 ? Mat3(Mat3::Zero()) : Mat3(a + a.transpose()));
+        if (i % 3 != 1) f.walled.push_back(std::uint32_t(i)), f.walledBlock.push_back(f.block.back());
         f.boundarySum.emplace_back(unit(rng), unit(rng), unit(rng));
         f.bodyRate.push_back(unit(rng));
     }
@@ -57,10 +64,12 @@ TEST(PairSweeps, TakeTheViscousProductAsDefinedPairByPair) {
     const Field f = field(40);
     const Real dt = 0.3;
     std::vector<Vec3> out(f.x.size()), out1(f.x.size()), out2(f.x.size());
-    sweeps::viscousProduct(0, f.x.size(), {&f.list, f.weight.data()}, f.block.data(), f.xRows.data(), f.uRows.data(),
-                           dt, out.data());
+    // in two ranges, as a parallel loop's blocks take them: the second finds its first boundary block itself
+    for (const auto& [begin, end] : {std::pair<std::size_t, std::size_t>{0, 17}, {17, f.x.size()}})
+        sweeps::viscousProduct(begin, end, {&f.list, f.weight.data()}, f.boundary(), f.xRows.data(), f.uRows.data(),
+                               dt, out.data());
     // the two-input sweep gives each input's product, the same bytes as one at a time
-    sweeps::viscousProducts(0, f.x.size(), {&f.list, f.weight.data()}, f.block.data(), f.xRows.data(),
+    sweeps::viscousProducts(0, f.x.size(), {&f.list, f.weight.data()}, f.boundary(), f.xRows.data(),
                             f.xRows.data(), f.uRows.data(), dt, out1.data(), out2.data());
     for (std::size_t i = 0; i < f.x.size(); ++i) {
         Vec3 a = Vec3::Zero();
@@ -108,8 +117,8 @@ TEST(PairSweeps, TakeTheSameSumsWhereTheyPrefetch) {
     std::vector<Vec3> out(n), out1(n), out2(n), out3(n), dv(n);
     std::vector<Real> rate(n);
     const sweeps::Pairs pairs{&f.list, f.weight.data()};
-    sweeps::viscousProduct(0, n, pairs, f.block.data(), f.xRows.data(), f.uRows.data(), dt, out.data());
-    sweeps::viscousProducts(0, n, pairs, f.block.data(), f.xRows.data(), f.xRows.data(), f.uRows.data(),
+    sweeps::viscousProduct(0, n, pairs, f.boundary(), f.xRows.data(), f.uRows.data(), dt, out.data());
+    sweeps::viscousProducts(0, n, pairs, f.boundary(), f.xRows.data(), f.xRows.data(), f.uRows.data(),
                             f.xRows.data(), dt, out1.data(), out2.data(), out3.data());
     sweeps::densityRate(0, n, pairs, f.boundarySum.data(), f.bodyRate.data(), f.xRows.data(), f.uRows.data(),
                         rate.data());

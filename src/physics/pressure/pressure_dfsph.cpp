@@ -330,8 +330,9 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     // expansion on, the diagonal goes on alone: 435 products; the 50k anchor block keeps its 3.50 + 0.75 a step.
     bool coarse = m_coarse.active();
     int expansions = 0;
-    // The sums by cell: each fixed block of particles sums the runs of particles from one cell (they lie in Z order,
-    // so a cell's come together), and the runs are added up in the blocks' order, the same on any thread count.
+    // The sums by cell: each fixed block of particles sums the runs of particles from one cell (they lie in the
+    // grid's cell order, so a cell's come in a few runs), and the runs are added up in the blocks' order, the same on
+    // any thread count.
     const std::size_t blocks = (n + kCoarseBlock - 1) / kCoarseBlock;
     m_coarseRuns.resize(blocks);
     auto coarseSolve = [&](bool withQ) {

@@ -65,9 +65,8 @@ Real ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& pa
         sweeps::toRows(begin, end, in.data(), m_inputRows.data());
     });
     return deterministicBlockSum(particles.size(), [&](std::size_t begin, std::size_t end) {
-        sweeps::viscousProduct(begin, end, {&ctx.fluidNeighbours, pairs().data()},
-                               sticky() ? m_boundaryBlock.data() : nullptr, ctx.positionRows.data(), m_inputRows.data(),
-                               ctx.dt, out.data());
+        sweeps::viscousProduct(begin, end, {&ctx.fluidNeighbours, pairs().data()}, boundaryBlocks(),
+                               ctx.positionRows.data(), m_inputRows.data(), ctx.dt, out.data());
         Real s = 0;
         for (std::size_t i = begin; i < end; ++i) s += in[i].dot(out[i]);
         return s;
@@ -98,9 +97,13 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
                                    : Mat3(Mat3(Mat3::Identity() - dt * aii).inverse());
     });
     m_nearBoundary.clear();
+    m_nearBlocks.clear();
     if (sticky())
         for (std::size_t i = 0; i < n; ++i)
-            if (ctx.boundaryNeighbours.first(i) != ctx.boundaryNeighbours.last(i)) m_nearBoundary.push_back(std::uint32_t(i));
+            if (ctx.boundaryNeighbours.first(i) != ctx.boundaryNeighbours.last(i)) {
+                m_nearBoundary.push_back(std::uint32_t(i));
+                m_nearBlocks.push_back(m_boundaryBlock[i]);
+            }
     m_rigid.build(x, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary, ctx.kernel.supportRadius());
     using P = ViscosityParams::Preconditioner;
     // dt A against the identity, about dt mu / (rho h^2): stiff particles join clusters and tighten the tolerance.
@@ -172,7 +175,7 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
         if (last) sweeps::toRows(begin, end, earlier->data(), m_inputRows3.data());
     });
     const sweeps::Pairs fluidPairs{&ctx.fluidNeighbours, pairs().data()};
-    const Mat3* boundary = sticky() ? m_boundaryBlock.data() : nullptr;
+    const sweeps::BoundaryBlocks boundary = boundaryBlocks();
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         if (last)
             sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), m_inputRows.data(),

@@ -29,6 +29,9 @@ private:
     /// out = (I - dt A) in; returns in . out.
     Real multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out);
+    sweeps::BoundaryBlocks boundaryBlocks() const {
+        return {m_nearBoundary.data(), m_nearBlocks.data(), m_nearBlocks.size()};
+    }
 
     std::vector<Real>* m_rigidFlag;  // attribute::kViscouslyRigid
     std::vector<Vec3> m_b;
@@ -36,6 +39,7 @@ private:
     std::vector<Mat3> m_inverseDiagonal;
     std::vector<Mat3> m_boundaryBlock;  // -dt times the boundary part of each diagonal block, with boundary_mu > 0
     std::vector<std::uint32_t> m_nearBoundary;  // the particles with a boundary part
+    std::vector<Mat3> m_nearBlocks;             // their m_boundaryBlock, in that order, for the products
     std::vector<Vec3> m_start, m_guess;         // M v and M out before CG
     std::vector<Vec3> m_lastProduct, m_earlierProduct;  // M lastChange() and M earlierChange() for the warm start
     sweeps::Rows m_inputRows, m_inputRows2, m_inputRows3;  // the sweeps' rows of the products' inputs
