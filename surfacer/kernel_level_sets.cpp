@@ -119,7 +119,8 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
     const Real support = kKernelSupport * r;
     const Real support2 = support * support;
     const float inverseCube = float(1 / (support2 * support));
-    UniformGrid grid(support);
+    // Z order: the kernel sums walk the level set's leaves, which OpenVDB's tree keeps in blocks of blocks.
+    UniformGrid grid(support, UniformGrid::kAlwaysZOrder);
     grid.build(x);
     grid.releaseWorkingMemory();
     const std::vector<Real>& sx = grid.sortedCoords(0);
@@ -255,7 +256,8 @@ struct KernelBins {
     Vec3 reach = Vec3::Zero();
     std::vector<Box> boxes;  // per cell
 
-    KernelBins(const std::vector<Ellipsoid>& kernels, Real spacing) : h(spacing), grid(8 * spacing) {
+    KernelBins(const std::vector<Ellipsoid>& kernels, Real spacing)
+        : h(spacing), grid(8 * spacing, UniformGrid::kAlwaysZOrder) {  // Z order, as the kernels' grid
         std::vector<Vec3> centres(kernels.size());
         for (std::size_t i = 0; i < kernels.size(); ++i)
             reach = reach.cwiseMax(kernels[i].extent.cast<Real>()), centres[i] = kernels[i].centre;

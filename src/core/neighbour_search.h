@@ -58,7 +58,11 @@ public:
     /// 3 % more.
     static constexpr std::size_t kSlabPoints = 32768;
 
-    /// slabPoints: kSlabPoints, or another bound for row order (tests choose each order with it; at most 2^40).
+    /// slabPoints with which a grid keeps Z order for any point set.
+    static constexpr std::size_t kAlwaysZOrder = 0;
+
+    /// slabPoints: kSlabPoints, kAlwaysZOrder (for consumers that walk space in blocks, as OpenVDB's trees do), or
+    /// another bound for row order (at most 2^40).
     explicit UniformGrid(Real cellSize, std::size_t slabPoints = kSlabPoints);
 
     /// Sorts the points into cells. Throws std::runtime_error for a non-finite point or one outside the

@@ -8,8 +8,8 @@
 // its row. The viscous product takes four pairs at a time, their rows transposed into one vector per coordinate; the
 // pressure sweeps one pair per vector, its lanes the coordinates. Vectors are AVX2's in the default build, with fused
 // multiply-adds where a sum takes a product; elsewhere the same four lanes in plain C++ (std::fma for those), which
-// round alike, so that both builds give the same bytes. A particle's sum is
-// always taken in the same order, so results do not depend on the thread count.
+// round alike, so that both builds give the same bytes. A particle's sum is always taken in the same order, so
+// results do not depend on the thread count.
 
 #include "core/neighbour_search.h"
 #include "core/types.h"
@@ -44,8 +44,8 @@ struct Pairs {
 
 /// The boundary's parts of the viscous operator's diagonal blocks, B_k = -dt sum_q kb_q x_ik x_ik^T, summed once a
 /// step (the boundary stands still during a solve), for the particles that have one: particle[k] ascending, block[k]
-/// its B. Only a fluid's layers next to a wall have one; a block for every particle was 72 bytes each product streamed
-/// for the few.
+/// its B. Only a fluid's layers next to a wall have one: a block for every particle would stream 72 bytes a particle
+/// through each product for those few.
 struct BoundaryBlocks {
     const std::uint32_t* particle = nullptr;
     const Mat3* block = nullptr;
