@@ -1,8 +1,9 @@
 // The solvers' inner loops on their own: one viscous product (I - dt A) v and one pressure product (a velocity change
-// and a density rate) per iteration, on a jittered lattice block in the grid's cell order, at 8k, 50k, 200k and 1M particles on 1
-// and 2 threads; beside them the machine's streaming bandwidth (a triad over 256 MiB arrays), so that each product's
-// cost can be set against the time its bytes take to move; and the viscous product alone on input rows that no thread
-// rewrites between passes (`viscousKeptRows`), which shows what two threads lose to each other's fresh writes.
+// and a density rate) per iteration, on a jittered lattice block in the grid's cell order, at 8k, 50k, 200k and 1M
+// particles on 1 and 2 threads; beside them the machine's streaming bandwidth (a triad over 256 MiB arrays), so that
+// each product's cost can be set against the time its bytes take to move; and the viscous product alone on input rows
+// that no thread rewrites between passes (`viscousKeptRows`), which shows what two threads lose to each other's fresh
+// writes.
 // Run: build/benchmarks/sweep_bench --benchmark_counters_tabular=true
 
 #include "core/kernels.h"
@@ -29,7 +30,8 @@ struct Block {
     sweeps::PairWeights weight;  // one per pair
 };
 
-// A jittered lattice block of about n particles in the grid's cell order (as the simulator keeps them), its neighbour lists and a weight per pair.
+// A jittered lattice block of about n particles in the grid's cell order (as the simulator keeps them), its neighbour
+// lists and a weight per pair.
 Block block(std::size_t n) {
     const int side = int(std::round(std::cbrt(Real(n))));
     std::mt19937_64 rng(42);

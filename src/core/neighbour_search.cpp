@@ -132,8 +132,7 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     const std::size_t n = x.size();
     if (n >= std::size_t(UINT32_MAX)) throw std::runtime_error("neighbour search: more than 4 billion points");
     const Real inv = 1 / m_cellSize;
-    // The box of the points' cells, for the order; points that are not finite or too far are left to the key pass,
-    // which names them.
+    // The box of the points' cells, for the order; a point the grid cannot address stops the build, named.
     using Box = std::pair<Vec3, Vec3>;
     const Real big = std::numeric_limits<Real>::max();
     const Box box = tbb::parallel_reduce(
@@ -141,7 +140,10 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
         [&](const auto& r, Box b) {
             for (std::size_t i = r.begin(); i != r.end(); ++i) {
                 const Vec3 c = (x[i] * inv).array().floor();
-                if (!c.allFinite() || c.cwiseAbs().maxCoeff() > Real(kMaxCell)) continue;
+                if (!c.allFinite() || c.cwiseAbs().maxCoeff() > Real(kMaxCell))
+                    throw std::runtime_error("neighbour search: point " + std::to_string(i) +
+                                             (x[i].allFinite() ? " lies too far from the origin for the grid"
+                                                               : " has a non-finite position"));
                 b.first = b.first.cwiseMin(c), b.second = b.second.cwiseMax(c);
             }
             return b;
@@ -157,10 +159,6 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& r) {
         for (std::size_t i = r.begin(); i != r.end(); ++i) {
             const Vec3 c = (x[i] * inv).array().floor();
-            if (!c.allFinite() || c.cwiseAbs().maxCoeff() > Real(kMaxCell))
-                throw std::runtime_error("neighbour search: point " + std::to_string(i) +
-                                         (x[i].allFinite() ? " lies too far from the origin for the grid"
-                                                           : " has a non-finite position"));
             keyed[i] = {key(std::int64_t(c.x()), std::int64_t(c.y()), std::int64_t(c.z())), std::uint32_t(i)};
         }
     });

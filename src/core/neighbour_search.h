@@ -53,9 +53,9 @@ public:
     static constexpr std::int64_t kMaxCell = (std::int64_t(1) << 20) - 2;
     /// Row order up to this many points in three slabs of cells. A solver sweep reads two rows of 32 bytes at each
     /// neighbour; 32k points' are 2 MiB, two to four times a current core's level-2 cache, which the slab's pairs
-    /// share. Measured on the block landing of the anchors (1 thread): 50k particles (8k in three slabs) 8 % less
+    /// share. Measured on the block landing of the anchors (1 thread): 50k particles (8k in three slabs) 8-19 % less
     /// time a step in row order than in Z order, 195k (20k) 1-6 % less; a 1M blob (60k in three slabs, 2 threads)
-    /// 3 % more.
+    /// 2-4 % more (docs/benchmarks.md, "Cells in row order").
     static constexpr std::size_t kSlabPoints = 32768;
 
     /// slabPoints with which a grid keeps Z order for any point set.

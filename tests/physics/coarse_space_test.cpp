@@ -79,7 +79,7 @@ TEST(ClusterModes, RecoversAnyRigidMotionOfTheClusters) {
     for (const Groups* group : {static_cast<const Groups*>(nullptr), static_cast<const Groups*>(&alternate),
                                 static_cast<const Groups*>(&someOutside)}) {
         ClusterModes modes;
-        modes.build(s.x, group, 2 * PairSystem::kSupport, 1000, s.fluid, s.k, s.dt, nullptr, {});
+        modes.build(s.x, group, 2 * PairSystem::kSupport, 1000, s.fluid, s.k, s.dt, {});
         ASSERT_EQ(modes.clusters(), group == &alternate ? 16u : 8u);
         // a rigid motion per cluster (cells of side 4.2 over a 9^3 lattice): the velocity of particle i in its cell
         std::mt19937 rng(3);
@@ -111,7 +111,7 @@ TEST(ClusterModes, FewerLargerClustersStillHoldTheWholeFluidsRigidMotion) {
     // lattice lies in the span of any clustering, so the correction still recovers it (to round-off, as above).
     const PairSystem s(12);
     ClusterModes modes;
-    modes.build(s.x, nullptr, 2 * PairSystem::kSupport, 8, s.fluid, s.k, s.dt, nullptr, {});
+    modes.build(s.x, nullptr, 2 * PairSystem::kSupport, 8, s.fluid, s.k, s.dt, {});
     EXPECT_LE(modes.clusters(), 8u);
     EXPECT_GE(modes.clusters(), 2u);  // not one cell for everything
     std::vector<Vec3> motion(s.x.size());
@@ -135,9 +135,9 @@ TEST(ClusterModes, CountsTheClustersOfFluidFarApart) {
         ++occupied[{int(c.x()), int(c.y()), int(c.z())}];
     }
     ClusterModes modes;
-    modes.build(s.x, nullptr, cell, 1000, s.fluid, s.k, s.dt, nullptr, {});
+    modes.build(s.x, nullptr, cell, 1000, s.fluid, s.k, s.dt, {});
     EXPECT_EQ(modes.clusters(), occupied.size());
-    modes.build(s.x, nullptr, cell, 2, s.fluid, s.k, s.dt, nullptr, {});
+    modes.build(s.x, nullptr, cell, 2, s.fluid, s.k, s.dt, {});
     EXPECT_EQ(modes.clusters(), 2u);
 }
 

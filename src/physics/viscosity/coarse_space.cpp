@@ -68,8 +68,7 @@ std::array<std::uint64_t, 3> keyCell(std::int64_t key) {
 
 }  // namespace
 
-void RigidModes::build(const std::vector<Vec3>& x, const std::vector<Mat3>* extra,
-                       const std::vector<std::uint32_t>& withExtra, Real minScale) {
+void RigidModes::build(const std::vector<Vec3>& x, const sweeps::BoundaryBlocks& boundary, Real minScale) {
     const std::size_t n = x.size();
     m_centre = deterministicSum<Vec3>(n, [&](std::size_t i) { return x[i]; }, Vec3::Zero()) / Real(n);
     const Real spread = deterministicSum(n, [&](std::size_t i) { return (x[i] - m_centre).squaredNorm(); });
@@ -82,11 +81,9 @@ void RigidModes::build(const std::vector<Vec3>& x, const std::vector<Mat3>* extr
         return a * a.transpose();
     }, Mat3::Zero());
     Mat6 e = identityPart(Real(n), arms, second);
-    if (extra)
-        e += deterministicSum<Mat6>(withExtra.size(), [&](std::size_t k) -> Mat6 {
-            const std::uint32_t i = withExtra[k];
-            return boundaryPart(arm(x[i]), (*extra)[i]);
-        }, Mat6::Zero());
+    e += deterministicSum<Mat6>(boundary.count, [&](std::size_t k) -> Mat6 {
+        return boundaryPart(arm(x[boundary.particle[k]]), boundary.block[k]);
+    }, Mat6::Zero());
     // Pseudo-inverse: a lone particle has no rotations, particles on a line none about that line.
     const Eigen::SelfAdjointEigenSolver<Mat6> eigen(e);
     const Vec6 values = eigen.eigenvalues();
@@ -206,8 +203,7 @@ void BlockLdlt::solve(Eigen::Matrix<Real, Eigen::Dynamic, 1>& b) const {
 
 void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint8_t>* group, Real cellSize,
                          std::size_t maxClusters, const NeighbourList& fluid,
-                         const sweeps::PairWeights& pairs, Real dt, const std::vector<Mat3>* extra,
-                         const std::vector<std::uint32_t>& withExtra) {
+                         const sweeps::PairWeights& pairs, Real dt, const sweeps::BoundaryBlocks& boundary) {
     const std::size_t n = x.size();
     // The clusters: particles sorted by cell and group, then by index, so the order is the same for any thread count.
     // Cells grow until there are at most maxClusters, which bounds the cost of factoring E at high resolution; the
@@ -297,11 +293,9 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
         for (std::uint32_t k = m_firstMember[c]; k < m_firstMember[c + 1]; ++k) sum += x[m_members[k]];
         m_centre[c] = sum / Real(m_firstMember[c + 1] - m_firstMember[c]);
     });
-    std::vector<char> hasExtra;
-    if (extra) {
-        hasExtra.assign(n, 0);
-        for (std::uint32_t i : withExtra) hasExtra[i] = 1;
-    }
+    constexpr std::uint32_t kNoBlock = UINT32_MAX;  // each particle's entry in `boundary`
+    std::vector<std::uint32_t> blockOf(boundary.count ? n : 0, kNoBlock);
+    for (std::size_t k = 0; k < boundary.count; ++k) blockOf[boundary.particle[k]] = std::uint32_t(k);
 
     // Each cluster's row of E: its diagonal block and its blocks with the adjacent clusters.
     std::vector<std::vector<std::pair<std::uint32_t, Mat6>>> rows(clusters);
@@ -323,7 +317,7 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
             const Vec3 ai = arm(c, x[i]);
             arms += ai;
             second += ai * ai.transpose();
-            if (extra && hasExtra[i]) diagonal += boundaryPart(ai, (*extra)[i]);
+            if (!blockOf.empty() && blockOf[i] != kNoBlock) diagonal += boundaryPart(ai, boundary.block[blockOf[i]]);
             for (std::size_t p = fluid.first(i); p < fluid.last(i); ++p) {
                 const std::uint32_t j = fluid.indices[p];
                 const std::uint32_t cj = m_of[j];

@@ -19,10 +19,8 @@ using Mat6 = Eigen::Matrix<Real, 6, 6>;
 /// Within this space the system is the identity plus the (block-diagonal) boundary part.
 class RigidModes {
 public:
-    /// extra: the boundary part of each particle's diagonal block of the system, or null when there is none;
-    /// withExtra: the particles whose part is not zero.
-    void build(const std::vector<Vec3>& x, const std::vector<Mat3>* extra, const std::vector<std::uint32_t>& withExtra,
-               Real minScale);
+    /// boundary: the boundary part of the system's diagonal block for the particles that have one.
+    void build(const std::vector<Vec3>& x, const sweeps::BoundaryBlocks& boundary, Real minScale);
     /// Z^T r: the total of r and its moment about the centroid.
     Vec6 project(const std::vector<Vec3>& x, const std::vector<Vec3>& r) const;
     /// (Z^T M Z)^+ y: the rigid motion whose image under the system has the projection y.
@@ -69,11 +67,10 @@ public:
     /// Clusters are the cells of side cellSize, larger where that would make more than maxClusters; particles of
     /// different groups (null: one group) never share a cluster. The system (I - dt A): fluid pairs with Eq. 7's
     /// coefficient k_ij in the order of the neighbour lists (the off-diagonal block of pair ij is dt k_ij x_ij x_ij^T),
-    /// and the boundary part of each particle's diagonal block (null: none; withExtra: the particles where it is not
-    /// zero).
+    /// and the boundary part of the diagonal block for the particles that have one.
     void build(const std::vector<Vec3>& x, const std::vector<std::uint8_t>* group, Real cellSize,
                std::size_t maxClusters, const NeighbourList& fluid, const sweeps::PairWeights& pairs, Real dt,
-               const std::vector<Mat3>* extra, const std::vector<std::uint32_t>& withExtra);
+               const sweeps::BoundaryBlocks& boundary);
     /// z += Z E^-1 Z^T r: the exact answer within the clusters' rigid motions.
     void addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const;
     std::size_t clusters() const { return m_centre.size(); }

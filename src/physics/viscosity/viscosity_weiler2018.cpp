@@ -104,7 +104,7 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
                 m_nearBoundary.push_back(std::uint32_t(i));
                 m_nearBlocks.push_back(m_boundaryBlock[i]);
             }
-    m_rigid.build(x, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary, ctx.kernel.supportRadius());
+    m_rigid.build(x, boundaryBlocks(), ctx.kernel.supportRadius());
     using P = ViscosityParams::Preconditioner;
     // dt A against the identity, about dt mu / (rho h^2): stiff particles join clusters and tighten the tolerance.
     const auto stiffness = [&](std::size_t i) { return -dt * fluidBlock(i).trace() / 3; };
@@ -133,7 +133,7 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
                              : std::uint8_t(0);
         });
         m_clusters.build(x, &m_group, kClusterSize * ctx.kernel.supportRadius(), maxClusters(n), ctx.fluidNeighbours,
-                         pairs(), dt, sticky() ? &m_boundaryBlock : nullptr, m_nearBoundary);
+                         pairs(), dt, boundaryBlocks());
         clusters = m_clusters.clusters() > 0;
     }
     // z = P r: the block diagonal, plus (two-level) the exact answer within the rigid motions of its clusters or,

@@ -39,7 +39,7 @@ private:
     std::vector<Mat3> m_inverseDiagonal;
     std::vector<Mat3> m_boundaryBlock;  // -dt times the boundary part of each diagonal block, with boundary_mu > 0
     std::vector<std::uint32_t> m_nearBoundary;  // the particles with a boundary part
-    std::vector<Mat3> m_nearBlocks;             // their m_boundaryBlock, in that order, for the products
+    std::vector<Mat3> m_nearBlocks;             // their m_boundaryBlock, in that order (boundaryBlocks())
     std::vector<Vec3> m_start, m_guess;         // M v and M out before CG
     std::vector<Vec3> m_lastProduct, m_earlierProduct;  // M lastChange() and M earlierChange() for the warm start
     sweeps::Rows m_inputRows, m_inputRows2, m_inputRows3;  // the sweeps' rows of the products' inputs
