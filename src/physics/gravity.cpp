@@ -14,7 +14,7 @@ public:
     explicit Gravity(const Vec3& g) : m_g(g) {}
     void apply(StepContext& ctx, ParticleSet& particles) override {
         auto& v = particles.v();
-        forEachParticle(v.size(), [&](std::size_t i) { v[i] += ctx.dt * m_g; }, 4096);
+        forEachParticle(v.size(), [&](std::size_t i) { v[i] += ctx.dt * m_g; });
     }
 
 private:

@@ -340,7 +340,7 @@ void Simulation::step(Real maxDt) {
         if (!m_boundary.x.empty()) m_contact.apply(ctx, m_fluid, m_boundaryGrid);
         auto& x = m_fluid.x();
         const auto& v = m_fluid.v();
-        forEachParticle(x.size(), [&](std::size_t i) { x[i] += dt * v[i]; }, 4096);
+        forEachParticle(x.size(), [&](std::size_t i) { x[i] += dt * v[i]; });
         removeEscaped();
     }
     const std::size_t before = m_fluid.size();
@@ -401,7 +401,7 @@ void Simulation::writeAt(Real t, const FrameWriter& write) {
         std::vector<Vec3>& end;
         ~Restore() { x.swap(end); }
     } restore{x, end};
-    forEachParticle(x.size(), [&](std::size_t i) { x[i] -= back * v[i]; }, 4096);
+    forEachParticle(x.size(), [&](std::size_t i) { x[i] -= back * v[i]; });
     write(m_fluid, m_boundary.movingBodies(t));
 }
 

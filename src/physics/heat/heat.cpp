@@ -213,7 +213,7 @@ public:
         const Real h = ctx.dt / Real(substeps);
         for (std::size_t s = 0; s < substeps; ++s) {
             if (s > 0) rates();
-            forEachParticle(n, [&](std::size_t i) { T[i] += h * m_rate[i]; }, 4096);
+            forEachParticle(n, [&](std::size_t i) { T[i] += h * m_rate[i]; });
         }
         m_substeps += substeps;
         if (substeps > 1 && m_substepsMax <= 1)
@@ -238,7 +238,7 @@ public:
             // [Eq. 14], integrated exactly: T relaxes towards the room over t_r, for any dt.
             if (m_params.radiationTime > 0)
                 T[i] = m_params.roomTemperature + (T[i] - m_params.roomTemperature) * decay;
-        }, 1024);
+        });
     }
 
     /// Conduction sub-steps: per step on average, and the most in one step.

@@ -152,7 +152,7 @@ void PressureCoarseSpace::assign(const std::vector<Vec3>& x) {
         const Vec3 c = (x[i] * inverse).array().floor();
         const std::int64_t g = m_grid.findCell(std::int64_t(c.x()), std::int64_t(c.y()), std::int64_t(c.z()));
         m_cellOf[i] = g < 0 ? kNone : std::uint32_t(g);
-    }, 4096);
+    });
 }
 
 void PressureCoarseSpace::save(ByteWriter& out) const {

@@ -160,7 +160,7 @@ void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Rea
     // can only push them further apart: see kSeparated.
     forEachParticle(particles.size(), [&](std::size_t i) {
         s[i] = ctx.density[i] < (1 - kSeparated) * ctx.restDensity[i] ? 0 : s[i] * scale;
-    }, 4096);
+    });
     auto& v = particles.v();
     velocityChanges(ctx, particles, s, m_velocityChange);
     // On a body the viscosity solve moves as one, the warm start's push is spread over the whole body before the
@@ -183,11 +183,11 @@ void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Rea
         const Real push = sums.head<3>().norm(), limit = sums[3];
         if (push > limit) {
             const Real alpha = limit / push;
-            forEachParticle(particles.size(), [&](std::size_t i) { if ((*rigid)[i] != 0) s[i] *= alpha; }, 4096);
+            forEachParticle(particles.size(), [&](std::size_t i) { if ((*rigid)[i] != 0) s[i] *= alpha; });
             velocityChanges(ctx, particles, s, m_velocityChange);
         }
     }
-    forEachParticle(particles.size(), [&](std::size_t i) { v[i] += m_velocityChange[i]; }, 4096);
+    forEachParticle(particles.size(), [&](std::size_t i) { v[i] += m_velocityChange[i]; });
     addBoundaryLoads(ctx, particles, s);
 }
 
@@ -239,7 +239,7 @@ std::size_t PressureDFSPH::solveJacobi(Solve which, StepContext& ctx, ParticleSe
             pressure[i] = next;
         });
         velocityChanges(ctx, particles, m_change, m_velocityChange);
-        forEachParticle(n, [&](std::size_t i) { v[i] += m_velocityChange[i]; }, 4096);
+        forEachParticle(n, [&](std::size_t i) { v[i] += m_velocityChange[i]; });
     }
 }
 
@@ -379,7 +379,7 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
         const Real g = gamma(error);
         if (measured[1] > g * g * measured[2]) {
             // Proportioning: release the particles at zero pressure that their neighbours compress.
-            forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * chopped(i); }, 4096);
+            forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * chopped(i); });
             using Vec2 = Eigen::Matrix<Real, 2, 1>;
             const Vec2 zq = multiplyAnd(z, Vec2(Vec2::Zero()), [&](std::size_t i) {
                 return Vec2(z[i] * q[i], chopped(i) * z[i]);
@@ -391,7 +391,7 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
         }
         if (restart) {
             if (coarse) coarseSolve(false);
-            forEachParticle(n, [&](std::size_t i) { dir[i] = inverseD(i) * free(i) + coarseAt(i); }, 4096);
+            forEachParticle(n, [&](std::size_t i) { dir[i] = inverseD(i) * free(i) + coarseAt(i); });
         }
         restart = false;
         // d . q, free . d, and the longest step that keeps every pressure >= 0.
@@ -426,14 +426,14 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
             }
             const Real beta = zq / sums.dq;
             measured = zqMeasured.tail<3>();
-            forEachParticle(n, [&](std::size_t i) { dir[i] = z[i] + coarseAt(i) - beta * dir[i]; }, 4096);
+            forEachParticle(n, [&](std::size_t i) { dir[i] = z[i] + coarseAt(i) - beta * dir[i]; });
         } else {
             // Expansion: up to the bound, then a projected gradient step; conjugate directions start again.
             if (++expansions == kCoarseExpansions) coarse = false;
             forEachParticle(n, [&](std::size_t i) {
                 moveOne(i, sums.feasible, dir);
                 z[i] = pressure[i] - std::max<Real>(pressure[i] - kRelaxation * inverseD(i) * free(i), 0);
-            }, 4096);
+            });
             measured = multiplyAnd(z, Vec3(Vec3::Zero()), [&](std::size_t i) {
                 moveOne(i, 1, z);
                 return measure(i);

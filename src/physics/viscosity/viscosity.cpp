@@ -95,7 +95,7 @@ ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& preco
         const Real rzNext = precondition(r, z);
         const Real beta = rzNext / rz;
         rz = rzNext;
-        forEachParticle(n, [&](std::size_t i) { p[i] = z[i] + beta * p[i]; }, 4096);
+        forEachParticle(n, [&](std::size_t i) { p[i] = z[i] + beta * p[i]; });
     }
 }
 
@@ -119,7 +119,7 @@ void leastEnergyGuess(const std::vector<Vec3>& b, const std::vector<Vec3>& v, co
     forEachParticle(b.size(), [&](std::size_t i) {
         x[i] = v[i] + a * d1[i] + c * d2[i];
         mx[i] = mv[i] + a * md1[i] + c * md2[i];
-    }, 4096);
+    });
 }
 
 ParticleViscosity::ParticleViscosity(const ViscosityParams& params, const SimulationSetup& setup,
@@ -161,7 +161,7 @@ void ParticleViscosity::refresh(const ParticleSet& particles) {
         const std::size_t s = sourceIndex(source, i);
         const auto& law = m_sourceLaw[s];
         mu[i] = law && temperature ? law->at((*temperature)[i]) : m_sourceMu[s];
-    }, 4096);
+    });
 }
 
 ViscosityMethod::ViscosityMethod(const ViscosityParams& params, const SimulationSetup& setup, ParticleSet& particles)
@@ -197,7 +197,7 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
     const Real* rho = ctx.density.data();
     const Real scale = m_weights.scale();
     m_inverseDensity.resize(particles.size());
-    forEachParticle(particles.size(), [&](std::size_t i) { m_inverseDensity[i] = 1 / rho[i]; }, 4096);
+    forEachParticle(particles.size(), [&](std::size_t i) { m_inverseDensity[i] = 1 / rho[i]; });
     // 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)) g_ij, mu and m averaged over the pair so that the
     // operator is symmetric [Eq. 9], with LaplacianWeights' scale for 2(d+2) and its shape; the diagonal blocks in the
     // same pass (taken in three, the distances, the weights and the blocks, they cost twice as much on buckling).
