@@ -1,10 +1,9 @@
 #include "core/neighbour_search.h"
 
 #include "core/memory.h"
+#include "core/parallel.h"
 
 #include <tbb/enumerable_thread_specific.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <cmath>
@@ -135,10 +134,11 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     // The box of the points' cells, for the order; a point the grid cannot address stops the build, named.
     using Box = std::pair<Vec3, Vec3>;
     const Real big = std::numeric_limits<Real>::max();
-    const Box box = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, n, 4096), Box(Vec3::Constant(big), Vec3::Constant(-big)),
-        [&](const auto& r, Box b) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) {
+    const Box box = deterministicBlockReduce<Box>(
+        n,
+        [&](std::size_t begin, std::size_t end) {
+            Box b(Vec3::Constant(big), Vec3::Constant(-big));
+            for (std::size_t i = begin; i != end; ++i) {
                 const Vec3 c = (x[i] * inv).array().floor();
                 if (!c.allFinite() || c.cwiseAbs().maxCoeff() > Real(kMaxCell))
                     throw std::runtime_error("neighbour search: point " + std::to_string(i) +
@@ -148,6 +148,7 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
             }
             return b;
         },
+        Box(Vec3::Constant(big), Vec3::Constant(-big)),
         [](const Box& a, const Box& b) { return Box(a.first.cwiseMin(b.first), a.second.cwiseMax(b.second)); });
     m_rowOrder = false;
     if (box.first.x() <= box.second.x())
@@ -156,23 +157,23 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
 
     auto& keyed = m_keyed;
     keyed.resize(n);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) {
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i != end; ++i) {
             const Vec3 c = (x[i] * inv).array().floor();
             keyed[i] = {key(std::int64_t(c.x()), std::int64_t(c.y()), std::int64_t(c.z())), std::uint32_t(i)};
         }
-    });
+    }, 1024);
     // Indices ascend in keyed, so a stable sort by key gives the (key, index) order, the same for any thread count.
     sortByKey(keyed, m_keyedScratch);
 
     m_sorted.resize(n);
     for (auto& c : m_sortedCoords) c.resize(n);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& r) {
-        for (std::size_t s = r.begin(); s != r.end(); ++s) {
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t s = begin; s != end; ++s) {
             m_sorted[s] = keyed[s].second;
             for (int a = 0; a < 3; ++a) m_sortedCoords[std::size_t(a)][s] = x[keyed[s].second][a];
         }
-    });
+    }, 1024);
     m_cellKeys.clear();
     m_cellBegin.clear();
     m_cellCoords.clear();
@@ -306,7 +307,7 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     auto& chunkOf = out.scratch.chunkOf;
     auto& localStart = out.scratch.localStart;
     count.resize(n), chunkOf.resize(n), localStart.resize(n);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const auto& range) {
+    parallelRange(chunks, 1, n, [&](const auto& range) {
         CellCandidates& cand = scratch.local();
         for (std::size_t chunk = range.begin(); chunk != range.end(); ++chunk) {
             auto& buffer = buffers[chunk];  // never shrunk: its size is room, the lists fill it from the start
@@ -347,8 +348,8 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     out.offsets[0] = 0;
     for (std::size_t i = 0; i < n; ++i) out.offsets[i + 1] = out.offsets[i] + count[i];
     resizeForRefill(out.indices, out.offsets[n]);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1024), [&](const auto& range) {
-        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i != end; ++i) {
             const std::uint32_t* from = buffers[chunkOf[i]].data() + localStart[i];
             std::uint32_t* to = out.indices.data() + out.offsets[i];
             for (std::uint32_t k = 0; k < count[i]; ++k) to[k] = from[k];  // a few dozen: no memcpy call

@@ -9,7 +9,6 @@
 #include "physics/pressure/pressure_dfsph.h"
 
 #include <fmt/format.h>
-#include <tbb/parallel_reduce.h>
 
 namespace ganache {
 
@@ -221,13 +220,14 @@ void Simulation::computeDensities() {
 
 Real Simulation::cflStep() const {
     const auto& v = m_fluid.v();
-    const Real maxSpeed = std::sqrt(tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, v.size(), 4096), Real(0),
-        [&](const auto& r, Real s) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) s = std::max(s, v[i].squaredNorm());
+    const Real maxSpeed = std::sqrt(deterministicBlockReduce<Real>(
+        v.size(),
+        [&](std::size_t begin, std::size_t end) {
+            Real s = 0;
+            for (std::size_t i = begin; i != end; ++i) s = std::max(s, v[i].squaredNorm());
             return s;
         },
-        [](Real a, Real b) { return std::max(a, b); }));
+        Real(0), [](Real a, Real b) { return std::max(a, b); }));
     // [WKBB18 Alg. 1] dt <= 0.4 d / max|v|, d the particle diameter
     return maxSpeed > 0 ? m_timeStep.cfl * 2 * m_particleRadius / maxSpeed : std::numeric_limits<Real>::infinity();
 }
@@ -264,14 +264,14 @@ void Simulation::removeEscaped() {
 void Simulation::checkFinite(const char* stage) {
     const auto& x = m_fluid.x();
     const auto& v = m_fluid.v();
-    const std::size_t bad = tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, x.size(), 4096), x.size(),
-        [&](const auto& r, std::size_t first) {
-            for (std::size_t i = r.begin(); i != r.end() && i < first; ++i)
+    const std::size_t bad = deterministicBlockReduce<std::size_t>(
+        x.size(),
+        [&](std::size_t begin, std::size_t end) {
+            for (std::size_t i = begin; i != end; ++i)
                 if (!x[i].allFinite() || !v[i].allFinite()) return i;
-            return first;
+            return x.size();
         },
-        [](std::size_t a, std::size_t b) { return std::min(a, b); });
+        x.size(), [](std::size_t a, std::size_t b) { return std::min(a, b); });
     if (bad == x.size()) return;
     throw std::runtime_error(fmt::format(
         "step {} (t = {:.6f} s): particle id {} has a non-finite {} after the {} stage\n  fix: lower "

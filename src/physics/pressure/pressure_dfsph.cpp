@@ -82,13 +82,15 @@ T PressureDFSPH::ratesOfRows(const StepContext& ctx, std::size_t n, bool withBod
 }
 
 void PressureDFSPH::velocityChanges(const StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s,
-                                    std::vector<Vec3>& out, bool rows) {
+                                    std::vector<Vec3>& out, bool rows, std::vector<Vec3>* velocities) {
     out.resize(particles.size());
     if (rows) m_velocityRows.resize(particles.size());
     forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
         sweeps::pressureChange(begin, end, {&ctx.fluidNeighbours, m_weights.data()}, m_boundarySum.data(),
                                ctx.positionRows.data(), s.data(), ctx.dt, out.data(),
                                rows ? m_velocityRows.data() : nullptr);
+        if (velocities)
+            for (std::size_t i = begin; i < end; ++i) (*velocities)[i] += out[i];
     });
 }
 
@@ -156,13 +158,14 @@ void PressureDFSPH::restore(ByteReader& in) {
 
 void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Real scale, Real support) {
     auto& s = *m_pressure;
-    // A particle well below its rest density has come apart from its neighbours, and the pressure it held last step
-    // can only push them further apart: see kSeparated.
-    forEachParticle(particles.size(), [&](std::size_t i) {
-        s[i] = ctx.density[i] < (1 - kSeparated) * ctx.restDensity[i] ? 0 : s[i] * scale;
-    });
     auto& v = particles.v();
-    velocityChanges(ctx, particles, s, m_velocityChange);
+    // A particle well below its rest density has come apart from its neighbours, and the pressure it held last step
+    // can only push them further apart: see kSeparated. The same pass counts the particles that move as one body.
+    const std::vector<Real>* rigid = particles.find(attribute::kViscouslyRigid);
+    const std::size_t rigidCount = deterministicSum<std::size_t>(particles.size(), [&](std::size_t i) {
+        s[i] = ctx.density[i] < (1 - kSeparated) * ctx.restDensity[i] ? 0 : s[i] * scale;
+        return std::size_t(rigid && (*rigid)[i] != 0);
+    });
     // On a body the viscosity solve moves as one, the warm start's push is spread over the whole body before the
     // constant-density solve can revise it, and that solve, acting after viscosity, can take it back only where
     // particles touch. Reapplied whole after a landing, it bounced a 1e6 Pa s block off the floor at 0.40 m/s
@@ -170,7 +173,10 @@ void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Rea
     // those particles is at most their weight over the step, what holds a resting body up: the block lands and stays
     // (at twice the weight it still rocked at up to 7 cm/s; capping each particle's own push instead let the block
     // sink at 1-3 cm/s, since a rigid body's support sits in its contact layer).
-    if (const std::vector<Real>* rigid = particles.find(attribute::kViscouslyRigid)) {
+    if (rigidCount == 0) {
+        velocityChanges(ctx, particles, s, m_velocityChange, false, &v);
+    } else {
+        velocityChanges(ctx, particles, s, m_velocityChange);
         // The net push on those particles (pressures between them cancel: what is left is the walls' and the other
         // particles' push) against their weight.
         using Vec4 = Eigen::Matrix<Real, 4, 1>;
@@ -186,8 +192,8 @@ void PressureDFSPH::applyWarmStart(StepContext& ctx, ParticleSet& particles, Rea
             forEachParticle(particles.size(), [&](std::size_t i) { if ((*rigid)[i] != 0) s[i] *= alpha; });
             velocityChanges(ctx, particles, s, m_velocityChange);
         }
+        forEachParticle(particles.size(), [&](std::size_t i) { v[i] += m_velocityChange[i]; });
     }
-    forEachParticle(particles.size(), [&](std::size_t i) { v[i] += m_velocityChange[i]; });
     addBoundaryLoads(ctx, particles, s);
 }
 
@@ -238,8 +244,7 @@ std::size_t PressureDFSPH::solveJacobi(Solve which, StepContext& ctx, ParticleSe
             m_change[i] = next - pressure[i];
             pressure[i] = next;
         });
-        velocityChanges(ctx, particles, m_change, m_velocityChange);
-        forEachParticle(n, [&](std::size_t i) { v[i] += m_velocityChange[i]; });
+        velocityChanges(ctx, particles, m_change, m_velocityChange, false, &v);
     }
 }
 
@@ -264,7 +269,7 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     auto& q = m_product;
     auto& z = m_change;
     auto& dv = m_velocityChange;
-    for (auto* a : {&e, &dir, &q, &z}) a->assign(n, 0);
+    for (auto* a : {&e, &dir, &q, &z}) a->resize(n);  // each is written in full before it is read
     dv.resize(n);
     std::size_t products = 0;
     // dt^2 A d = -dt J dv with dv = -dt J^T d the velocity change of the pressures d: the sweeps leave J dv in q, and
@@ -453,7 +458,7 @@ std::size_t PressureDFSPH::solve(Solve which, StepContext& ctx, ParticleSet& par
                                        ? solveJacobi(which, ctx, particles, pressure, target)
                                        : solveMprgp(which, ctx, particles, pressure, target);
     // What this solve added to the pressures applied before it.
-    for (std::size_t i = 0; i < particles.size(); ++i) m_start[i] = pressure[i] - m_start[i];
+    forEachParticle(particles.size(), [&](std::size_t i) { m_start[i] = pressure[i] - m_start[i]; });
     addBoundaryLoads(ctx, particles, m_start);
     return iterations;
 }

@@ -60,9 +60,9 @@ private:
                   Join join) const;
     // -dt (sum_j m_j (s_i + s_j) grad W_ij + kWall sum_k Psi_k s_i grad W_ik): every particle's velocity change from
     // the pressures s (kappa / rho); the boundary mirrors the particle's own pressure [AIA+12, BK17]. With rows, also
-    // into m_velocityRows, for ratesOfRows.
+    // into m_velocityRows, for ratesOfRows; with `velocities`, also added to them in the same pass.
     void velocityChanges(const StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s,
-                         std::vector<Vec3>& out, bool rows = false);
+                         std::vector<Vec3>& out, bool rows = false, std::vector<Vec3>* velocities = nullptr);
     // Adds the impulse the pressures `s` gave through the boundary to each body's load.
     void addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const;
     // Whether a solve with this mean residual stops after `iteration` iterations (the tolerance reached and the

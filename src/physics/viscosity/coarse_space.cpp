@@ -72,15 +72,18 @@ std::array<std::uint64_t, 3> keyCell(std::int64_t key) {
 void RigidModes::build(const std::vector<Vec3>& x, const sweeps::BoundaryBlocks& boundary, Real minScale) {
     const std::size_t n = x.size();
     m_centre = deterministicSum<Vec3>(n, [&](std::size_t i) { return x[i]; }, Vec3::Zero()) / Real(n);
-    const Real spread = deterministicSum(n, [&](std::size_t i) { return (x[i] - m_centre).squaredNorm(); });
-    m_scale = std::max(std::sqrt(spread / Real(n)), minScale);
-    // E = Z^T M Z = sum_i Z_i^T (I + extra_i) Z_i: the fluid's own coupling has the rigid motions in its null
-    // space, so only the block-diagonal boundary part (when there is one) adds to the identity.
-    const Vec3 arms = deterministicSum<Vec3>(n, [&](std::size_t i) { return arm(x[i]); }, Vec3::Zero());
-    const Mat3 second = deterministicSum<Mat3>(n, [&](std::size_t i) -> Mat3 {
-        const Vec3 a = arm(x[i]);
-        return a * a.transpose();
-    }, Mat3::Zero());
+    // The offsets from the centre and their second moments in one pass; the arms are those over m_scale.
+    using Moments = Eigen::Matrix<Real, 3, 4>;
+    const Moments moments = deterministicSum<Moments>(n, [&](std::size_t i) -> Moments {
+        const Vec3 d = x[i] - m_centre;
+        Moments m;
+        m << d * d.transpose(), d;
+        return m;
+    }, Moments::Zero());
+    const Mat3 offsetSquares = moments.leftCols<3>();
+    m_scale = std::max(std::sqrt(offsetSquares.trace() / Real(n)), minScale);
+    const Vec3 arms = moments.col(3) / m_scale;
+    const Mat3 second = offsetSquares / (m_scale * m_scale);
     Mat6 e = identityPart(Real(n), arms, second);
     e += deterministicSum<Mat6>(boundary.count, [&](std::size_t k) -> Mat6 {
         return boundaryPart(arm(x[boundary.particle[k]]), boundary.block[k]);

@@ -68,15 +68,18 @@ ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& preco
                                        std::size_t maxIterations) {
     const std::size_t n = b.size();
     for (auto* a : {&r, &z, &p, &q}) a->resize(n);
-    scale = std::sqrt(deterministicSum(n, [&](std::size_t i) { return (b[i] - mv[i]).squaredNorm(); }));
+    // |b - M v|^2 and |r|^2 with r = b - M x, in one pass.
+    using Vec2 = Eigen::Matrix<Real, 2, 1>;
+    const Vec2 squares = deterministicSum<Vec2>(n, [&](std::size_t i) {
+        r[i] = b[i] - mx[i];
+        return Vec2((b[i] - mv[i]).squaredNorm(), r[i].squaredNorm());
+    }, Vec2::Zero());
+    scale = std::sqrt(squares[0]);
     if (scale == 0) {
         std::copy(v.begin(), v.end(), x.begin());
         return {0, 0, tolerance};
     }
-    const Real rr = deterministicSum(n, [&](std::size_t i) {
-        r[i] = b[i] - mx[i];
-        return r[i].squaredNorm();
-    });
+    const Real rr = squares[1];
     ViscosityPass pass;
     pass.tolerance = tolerance;
     pass.residual = std::sqrt(rr) / scale;
@@ -102,12 +105,16 @@ ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& preco
 void leastEnergyGuess(const std::vector<Vec3>& b, const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
                       const std::vector<Vec3>& d1, const std::vector<Vec3>& md1, const std::vector<Vec3>& d2,
                       const std::vector<Vec3>& md2, std::vector<Vec3>& x, std::vector<Vec3>& mx) {
+    const GuessSums sums = deterministicSum<GuessSums>(b.size(), [&](std::size_t i) {
+        return guessTerms(b[i], mv[i], d1[i], md1[i], d2[i], md2[i]);
+    }, GuessSums::Zero());
+    leastEnergyGuess(sums, v, mv, d1, md1, d2, md2, x, mx);
+}
+
+void leastEnergyGuess(const GuessSums& s, const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
+                      const std::vector<Vec3>& d1, const std::vector<Vec3>& md1, const std::vector<Vec3>& d2,
+                      const std::vector<Vec3>& md2, std::vector<Vec3>& x, std::vector<Vec3>& mx) {
     // Zero gradient along d1 and d2: [d1.Md1 d1.Md2; d2.Md1 d2.Md2] (a, c) = (d1.(b - Mv), d2.(b - Mv)).
-    using Vec5 = Eigen::Matrix<Real, 5, 1>;
-    const Vec5 s = deterministicSum<Vec5>(b.size(), [&](std::size_t i) {
-        const Vec3 r = b[i] - mv[i];
-        return Vec5(d1[i].dot(md1[i]), d1[i].dot(md2[i]), d2[i].dot(md2[i]), d1[i].dot(r), d2[i].dot(r));
-    }, Vec5::Zero());
     Real a = 0, c = 0;
     const Real det = s[0] * s[2] - s[1] * s[1];  // >= 0 (Cauchy-Schwarz in M's inner product)
     if (s[0] > 0 && s[2] > 0 && det > 1e-9 * s[0] * s[2]) {
@@ -116,7 +123,7 @@ void leastEnergyGuess(const std::vector<Vec3>& b, const std::vector<Vec3>& v, co
     } else if (s[0] > 0) {
         a = s[3] / s[0];
     }
-    forEachParticle(b.size(), [&](std::size_t i) {
+    forEachParticle(v.size(), [&](std::size_t i) {
         x[i] = v[i] + a * d1[i] + c * d2[i];
         mx[i] = mv[i] + a * md1[i] + c * md2[i];
     });
@@ -194,10 +201,7 @@ void ViscosityMethod::computeCoefficients(const StepContext& ctx, const Particle
     resizeForRefill(m_pairs, f.pairs());
     resizeForRefill(m_boundaryPairs, sticky() ? b.pairs() : 0);
     m_fluidBlocks.resize(particles.size());
-    const Real* rho = ctx.density.data();
     const Real scale = m_weights.scale();
-    m_inverseDensity.resize(particles.size());
-    forEachParticle(particles.size(), [&](std::size_t i) { m_inverseDensity[i] = 1 / rho[i]; });
     // 2(d+2) mu_ij m_ij / (rho_i rho_j (|x_ij|^2 + 0.01 h^2)) g_ij, mu and m averaged over the pair so that the
     // operator is symmetric [Eq. 9], with LaplacianWeights' scale for 2(d+2) and its shape; the diagonal blocks in the
     // same pass (taken in three, the distances, the weights and the blocks, they cost twice as much on buckling).
@@ -293,15 +297,18 @@ void ViscosityMethod::apply(StepContext& ctx, ParticleSet& particles) {
     m_warmPass = firstPass && m_params.warmStart;
     if (!firstPass) forEachParticle(n, [&](std::size_t i) { v[i] -= dv[i]; });
     m_out.resize(n);
-    if (!m_warmPass) {
-        forEachParticle(n, [&](std::size_t i) { m_out[i] = firstPass ? v[i] : Vec3(v[i] + dv[i]); });
-    } else {
-        const Real scale = m_lastDt > 0 ? ctx.dt / m_lastDt : 1;
-        // Rates dv / dt of the last two steps, r1 and r0: the guess is dt (r1 + (r1 - r0) / 2).
-        const Real ratio = m_earlierDt > 0 ? m_lastDt / m_earlierDt : 0;
-        forEachParticle(n, [&](std::size_t i) {
+    m_inverseDensity.resize(n);
+    // Rates dv / dt of the last two steps, r1 and r0: the warm start's guess is dt (r1 + (r1 - r0) / 2).
+    const Real scale = m_lastDt > 0 ? ctx.dt / m_lastDt : 1;
+    const Real ratio = m_earlierDt > 0 ? m_lastDt / m_earlierDt : 0;
+    forEachParticle(n, [&](std::size_t i) {
+        m_inverseDensity[i] = 1 / ctx.density[i];  // for computeCoefficients
+        if (m_warmPass)
             m_out[i] = v[i] + scale * (ratio > 0 ? Vec3(1.5 * dv[i] - 0.5 * ratio * earlier[i]) : dv[i]);
-        });
+        else
+            m_out[i] = firstPass ? v[i] : Vec3(v[i] + dv[i]);
+    });
+    if (m_warmPass) {
         m_earlierDt = m_lastDt;
         m_lastDt = ctx.dt;
     }

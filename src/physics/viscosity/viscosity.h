@@ -145,6 +145,19 @@ void leastEnergyGuess(const std::vector<Vec3>& b, const std::vector<Vec3>& v, co
                       const std::vector<Vec3>& d1, const std::vector<Vec3>& md1, const std::vector<Vec3>& d2,
                       const std::vector<Vec3>& md2, std::vector<Vec3>& x, std::vector<Vec3>& mx);
 
+/// What leastEnergyGuess decides on, summed over the particles: d1.Md1, d1.Md2, d2.Md2, d1.(b - Mv), d2.(b - Mv).
+using GuessSums = Eigen::Matrix<Real, 5, 1>;
+/// Particle i's share of GuessSums, for a pass that has its products at hand.
+inline GuessSums guessTerms(const Vec3& b, const Vec3& mv, const Vec3& d1, const Vec3& md1, const Vec3& d2,
+                            const Vec3& md2) {
+    const Vec3 r = b - mv;
+    return GuessSums(d1.dot(md1), d1.dot(md2), d2.dot(md2), d1.dot(r), d2.dot(r));
+}
+/// leastEnergyGuess from its sums, taken beforehand.
+void leastEnergyGuess(const GuessSums& sums, const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
+                      const std::vector<Vec3>& d1, const std::vector<Vec3>& md1, const std::vector<Vec3>& d2,
+                      const std::vector<Vec3>& md2, std::vector<Vec3>& x, std::vector<Vec3>& mx);
+
 /// A viscosity method as an effect. apply() takes back an earlier coupled pass's change, asks the method for the
 /// new velocities, and records the change, the boundary loads and the statistics.
 class ViscosityMethod : public Effect {
@@ -208,7 +221,7 @@ private:
     sweeps::PairWeights m_pairs;  // see pairs()
     std::vector<Real> m_boundaryPairs;
     std::vector<Mat3> m_fluidBlocks;
-    std::vector<Real> m_inverseDensity;  // 1 / rho_i of the step
+    std::vector<Real> m_inverseDensity;  // 1 / rho_i of the step, from apply()
     BodyLoads m_passLoads;    // the viscous loads of the latest pass, which a later pass of the step replaces
     std::size_t m_lastStep = 0;
     Real m_lastDt = 0, m_earlierDt = 0;  // the last two steps: scale the warm start

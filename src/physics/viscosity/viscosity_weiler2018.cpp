@@ -81,9 +81,11 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     m_b.resize(n);
     m_inverseDiagonal.resize(n);
 
-    // Right-hand side [Eq. 12] and block-diagonal preconditioner [Eq. 11].
+    // Right-hand side [Eq. 12], block-diagonal preconditioner [Eq. 11] and which particles are stiff (dt A against the
+    // identity, about dt mu / (rho h^2), from kStiff: they join clusters and tighten the tolerance), in one pass.
     if (sticky()) m_boundaryBlock.resize(n);
-    forEachParticle(n, [&](std::size_t i) {
+    auto& rigidFlag = *m_rigidFlag;
+    const bool stiff = deterministicSum<std::size_t>(n, [&](std::size_t i) {
         Mat3 aii = fluidBlock(i);
         Vec3 bodies = Vec3::Zero();
         if (sticky()) {
@@ -95,7 +97,9 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
         m_inverseDiagonal[i] = m_params.preconditioner == ViscosityParams::Preconditioner::None
                                    ? Mat3(Mat3::Identity())
                                    : Mat3(Mat3(Mat3::Identity() - dt * aii).inverse());
-    });
+        rigidFlag[i] = -dt * fluidBlock(i).trace() / 3 >= kStiff;
+        return std::size_t(rigidFlag[i]);
+    }) > 0;
     m_nearBoundary.clear();
     m_nearBlocks.clear();
     if (sticky())
@@ -106,13 +110,6 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
             }
     m_rigid.build(x, boundaryBlocks(), ctx.kernel.supportRadius());
     using P = ViscosityParams::Preconditioner;
-    // dt A against the identity, about dt mu / (rho h^2): stiff particles join clusters and tighten the tolerance.
-    const auto stiffness = [&](std::size_t i) { return -dt * fluidBlock(i).trace() / 3; };
-    auto& rigidFlag = *m_rigidFlag;
-    const bool stiff = deterministicSum<std::size_t>(n, [&](std::size_t i) {
-        rigidFlag[i] = stiffness(i) >= kStiff;
-        return std::size_t(rigidFlag[i]);
-    }) > 0;
     // Where viscosities differ (melting, several fluids), the correction the solve has to make is far larger at a few
     // particles than at the rest, and a residual small against the whole correction still leaves the runny particles'
     // velocities wrong: at 1e-2, particles of the default scene's molten film left it at up to 0.7 m/s once no particle
@@ -176,16 +173,22 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     });
     const sweeps::Pairs fluidPairs{&ctx.fluidNeighbours, pairs().data()};
     const sweeps::BoundaryBlocks boundary = boundaryBlocks();
-    forEachBlock(n, [&](std::size_t begin, std::size_t end) {
-        if (last)
-            sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), m_inputRows.data(),
-                                    m_inputRows2.data(), m_inputRows3.data(), dt, m_start.data(),
-                                    m_lastProduct.data(), m_earlierProduct.data());
-        else
+    // The products, and with the two changes what the least-energy guess decides on, from the same pass.
+    const GuessSums sums = deterministicBlockSum<GuessSums>(n, [&](std::size_t begin, std::size_t end) {
+        GuessSums s = GuessSums::Zero();
+        if (!last) {
             sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), m_inputRows.data(),
                                     m_inputRows2.data(), dt, m_start.data(), m_guess.data());
-    });
-    if (last) leastEnergyGuess(m_b, v, m_start, *last, m_lastProduct, *earlier, m_earlierProduct, out, m_guess);
+            return s;
+        }
+        sweeps::viscousProducts(begin, end, fluidPairs, boundary, ctx.positionRows.data(), m_inputRows.data(),
+                                m_inputRows2.data(), m_inputRows3.data(), dt, m_start.data(), m_lastProduct.data(),
+                                m_earlierProduct.data());
+        for (std::size_t i = begin; i < end; ++i)
+            s += guessTerms(m_b[i], m_start[i], (*last)[i], m_lastProduct[i], (*earlier)[i], m_earlierProduct[i]);
+        return s;
+    }, GuessSums::Zero());
+    if (last) leastEnergyGuess(sums, v, m_start, *last, m_lastProduct, *earlier, m_earlierProduct, out, m_guess);
     ViscosityPass pass = m_cg.solve(system, precondition, m_b, v, m_start, m_guess, out, tolerance,
                                     std::size_t(m_params.maxIterations));
     if (m_cg.scale == 0) return pass;  // v_df already solves the system
@@ -195,12 +198,12 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     // capped solve and spun itself apart within half a second. M Z is local, so the residual stays exact.
     std::vector<Vec3>& r = m_cg.r;
     const Vec6 rigid = m_rigid.solve(m_rigid.project(x, r));
-    forEachParticle(n, [&](std::size_t i) {
+    pass.residual = std::sqrt(deterministicSum(n, [&](std::size_t i) {
         const Vec3 u = m_rigid.velocity(rigid, x[i]);
         out[i] += u;
         r[i] -= sticky() ? Vec3(u + m_boundaryBlock[i] * u) : u;
-    });
-    pass.residual = std::sqrt(fieldDot(r, r)) / m_cg.scale;
+        return r[i].squaredNorm();
+    })) / m_cg.scale;
     return pass;
 }
 
