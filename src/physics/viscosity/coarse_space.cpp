@@ -84,6 +84,8 @@ void RigidModes::build(const std::vector<Vec3>& x, const sweeps::BoundaryBlocks&
     m_scale = std::max(std::sqrt(offsetSquares.trace() / Real(n)), minScale);
     const Vec3 arms = moments.col(3) / m_scale;
     const Mat3 second = offsetSquares / (m_scale * m_scale);
+    // E = Z^T M Z = sum_i Z_i^T (I + extra_i) Z_i: the fluid's own coupling has the rigid motions in its null
+    // space, so only the block-diagonal boundary part (when there is one) adds to the identity.
     Mat6 e = identityPart(Real(n), arms, second);
     e += deterministicSum<Mat6>(boundary.count, [&](std::size_t k) -> Mat6 {
         return boundaryPart(arm(x[boundary.particle[k]]), boundary.block[k]);
