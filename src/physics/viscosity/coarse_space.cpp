@@ -104,7 +104,7 @@ Vec6 RigidModes::project(const std::vector<Vec3>& x, const std::vector<Vec3>& r)
     return deterministicBlockSum<Vec6>(x.size(), [&](std::size_t begin, std::size_t end) {
         Vec6 y = Vec6::Zero();
         for (std::size_t i = begin; i < end; ++i) {
-            const Vec3 m = arm(x[i]).cross(r[i]);
+            const Vec3 m = moment(x[i], r[i]);
             for (int k = 0; k < 3; ++k) y[k] += r[i][k], y[3 + k] += m[k];
         }
         return y;

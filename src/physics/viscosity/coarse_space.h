@@ -23,6 +23,8 @@ public:
     void build(const std::vector<Vec3>& x, const sweeps::BoundaryBlocks& boundary, Real minScale);
     /// Z^T r: the total of r and its moment about the centroid.
     Vec6 project(const std::vector<Vec3>& x, const std::vector<Vec3>& r) const;
+    /// The moment of ri at xi: particle i's share of project()'s last three entries (the first three are ri).
+    Vec3 moment(const Vec3& xi, const Vec3& ri) const { return arm(xi).cross(ri); }
     /// (Z^T M Z)^+ y: the rigid motion whose image under the system has the projection y.
     Vec6 solve(const Vec6& y) const { return m_inverse * y; }
     /// The velocity of the rigid motion y at position xi.

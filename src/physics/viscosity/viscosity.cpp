@@ -62,10 +62,9 @@ ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& preco
     return solve(multiply, precondition, b, v, mv, mx, x, tolerance, maxIterations);
 }
 
-ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
-                                       const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
-                                       const std::vector<Vec3>& mx, std::vector<Vec3>& x, Real tolerance,
-                                       std::size_t maxIterations) {
+bool ConjugateGradient::start(const std::vector<Vec3>& b, const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
+                              const std::vector<Vec3>& mx, std::vector<Vec3>& x, Real tolerance,
+                              std::size_t maxIterations, ViscosityPass& pass) {
     const std::size_t n = b.size();
     for (auto* a : {&r, &z, &p, &q}) a->resize(n);
     // |b - M v|^2 and |r|^2 with r = b - M x, in one pass.
@@ -75,15 +74,22 @@ ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& preco
         return Vec2((b[i] - mv[i]).squaredNorm(), r[i].squaredNorm());
     }, Vec2::Zero());
     scale = std::sqrt(squares[0]);
+    pass = {0, 0, tolerance};
     if (scale == 0) {
         std::copy(v.begin(), v.end(), x.begin());
-        return {0, 0, tolerance};
+        return false;
     }
-    const Real rr = squares[1];
+    pass.residual = std::sqrt(squares[1]) / scale;
+    return pass.residual > tolerance && maxIterations > 0;
+}
+
+ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
+                                       const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
+                                       const std::vector<Vec3>& mx, std::vector<Vec3>& x, Real tolerance,
+                                       std::size_t maxIterations) {
+    const std::size_t n = b.size();
     ViscosityPass pass;
-    pass.tolerance = tolerance;
-    pass.residual = std::sqrt(rr) / scale;
-    if (pass.residual <= tolerance || maxIterations == 0) return pass;
+    if (!start(b, v, mv, mx, x, tolerance, maxIterations, pass)) return pass;
     Real rz = precondition(r, z);
     std::copy(z.begin(), z.end(), p.begin());
     for (;;) {

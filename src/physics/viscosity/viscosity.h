@@ -135,6 +135,11 @@ struct ConjugateGradient {
     ViscosityPass solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
                         const std::vector<Vec3>& v, const std::vector<Vec3>& mv, const std::vector<Vec3>& mx,
                         std::vector<Vec3>& x, Real tolerance, std::size_t maxIterations);
+    /// What solve() does before its iterations: sizes the vectors, sets `scale`, r = b - M x and `pass`; false where
+    /// no iteration is needed (x = v where scale is 0). For solvers that run their own iterations on these vectors.
+    bool start(const std::vector<Vec3>& b, const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
+               const std::vector<Vec3>& mx, std::vector<Vec3>& x, Real tolerance, std::size_t maxIterations,
+               ViscosityPass& pass);
 };
 
 /// The initial guess x = v + a d1 + c d2 with the least energy x.Mx / 2 - b.x over a and c (M symmetric positive

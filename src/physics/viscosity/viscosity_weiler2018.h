@@ -29,6 +29,13 @@ private:
     /// out = (I - dt A) in; returns in . out.
     Real multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                   std::vector<Vec3>& out);
+    /// The same with in's rows already in m_inputRows.
+    Real multiplyRows(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
+                      std::vector<Vec3>& out);
+    /// CG's iterations from m_cg.start() on, preconditioned by the block diagonal and, with `rigid`, the whole fluid's
+    /// rigid motions, in two vector passes an iteration (see the definition).
+    ViscosityPass iterate(const StepContext& ctx, const ParticleSet& particles, bool rigid, std::vector<Vec3>& out,
+                          Real tolerance, std::size_t maxIterations, ViscosityPass pass);
     sweeps::BoundaryBlocks boundaryBlocks() const {
         return {m_nearBoundary.data(), m_nearBlocks.data(), m_nearBlocks.size()};
     }
