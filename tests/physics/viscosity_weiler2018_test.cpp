@@ -155,8 +155,9 @@ TEST(ViscosityWeiler2018, CappedSolveStillConservesMomentum) {
 TEST(ViscosityWeiler2018, PreconditionerAndWarmStartCutIterations) {
     // [WKBB18 Sec. 4]: block Jacobi about halves the CG iterations, the warm start v_df + dv cuts them about
     // 8x. Measured on a viscous cube spinning in zero gravity (Fig. 5), where the solve works every step. ganache adds
-    // rigid motions as a coarse space (two-level), of the whole fluid or (its default) of each cluster; neither
-    // may take more iterations.
+    // rigid motions as a coarse space (two-level), of the whole fluid or (its default) of each cluster: the whole
+    // fluid's must cut the iterations (10.6 against 13.5 a solve when measured; CG without them takes 13.5, which is
+    // what this catches), the clusters may take no more.
     using P = ViscosityParams::Preconditioner;
     auto iterationsWith = [](P preconditioner, bool warmStart) {
         World world(0.01);
@@ -183,7 +184,7 @@ TEST(ViscosityWeiler2018, PreconditionerAndWarmStartCutIterations) {
                 plain, jacobi, plain / jacobi, both, jacobi / both, rigid, both / rigid, clusters, both / clusters);
     EXPECT_LT(jacobi, plain);
     EXPECT_LT(both, jacobi);
-    EXPECT_LE(rigid, both);
+    EXPECT_LT(rigid, both);
     EXPECT_LE(clusters, rigid);
 }
 
