@@ -227,7 +227,7 @@ ViscosityPass ViscosityWeiler2018::iterate(const StepContext& ctx, const Particl
     using Vec8 = Eigen::Matrix<Real, 8, 1>;
     auto update = [&](Real alpha, bool move) {
         return deterministicBlockSum<Vec8>(n, [&](std::size_t begin, std::size_t end) {
-            Real rr = 0, rz = 0;
+            Real rr = 0, rDr = 0;
             Vec3 total = Vec3::Zero(), moment = Vec3::Zero();
             for (std::size_t i = begin; i < end; ++i) {
                 if (move) {
@@ -236,11 +236,11 @@ ViscosityPass ViscosityWeiler2018::iterate(const StepContext& ctx, const Particl
                 }
                 const Vec3 ri = r[i];
                 rr += ri.squaredNorm();
-                rz += ri.dot(m_inverseDiagonal[i] * ri);
+                rDr += ri.dot(m_inverseDiagonal[i] * ri);
                 if (rigid) total += ri, moment += m_rigid.moment(x[i], ri);
             }
             Vec8 s;
-            s << rr, rz, total, moment;
+            s << rr, rDr, total, moment;
             return s;
         }, Vec8::Zero());
     };
