@@ -12,6 +12,7 @@
 
 #include "core/types.h"
 
+#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -24,10 +25,20 @@ constexpr std::size_t kGrain = 256;
 /// Loops over fewer items split statically (see above).
 constexpr std::size_t kStaticBelow = 8192;
 
+/// Whether loops run on the calling thread alone (`--threads 1`).
+inline bool serial() { return tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism) == 1; }
+
 /// tbb::parallel_for over [0, n) in parts of at least `grain`, partitioned as above by `items`, the particles (or
-/// other items) the loop covers.
+/// other items) the loop covers. On one thread the parts of `grain` items are called in order, without TBB: its
+/// tasks cost a few microseconds a loop even there, 6 % of the buckling anchor's step (2.41 -> 2.27 ms, 8
+/// alternating runs). The parts stay small so that the bodies' block buffers keep fitting in the caches.
 template <class Body>
 void parallelRange(std::size_t n, std::size_t grain, std::size_t items, const Body& body) {
+    if (serial()) {
+        for (std::size_t b = 0; b < n; b += grain)
+            body(tbb::blocked_range<std::size_t>(b, std::min(n, b + grain), grain));
+        return;
+    }
     const tbb::blocked_range<std::size_t> range(0, n, grain);
     if (items < kStaticBelow)
         tbb::parallel_for(range, body, tbb::static_partitioner());
