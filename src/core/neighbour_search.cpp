@@ -44,11 +44,11 @@ std::uint64_t hashSlot(std::uint64_t key, int bits) { return (key * 0x9E3779B97F
 }  // namespace
 
 // The same squared distance in both versions, so the same neighbours.
-std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Real yi, Real zi, Real r2) {
+std::uint64_t closer64(const Real* x, const Real* y, const Real* z, int lanes, Real xi, Real yi, Real zi, Real r2) {
     std::uint64_t bits = 0;
 #if defined(__AVX2__)
     const __m256d px = _mm256_set1_pd(xi), py = _mm256_set1_pd(yi), pz = _mm256_set1_pd(zi), r = _mm256_set1_pd(r2);
-    for (int b = 0; b < 64; b += 4) {
+    for (int b = 0; b < lanes; b += 4) {
         const __m256d ex = _mm256_sub_pd(px, _mm256_loadu_pd(x + b)), ey = _mm256_sub_pd(py, _mm256_loadu_pd(y + b));
         const __m256d ez = _mm256_sub_pd(pz, _mm256_loadu_pd(z + b));
         const __m256d d2 =
@@ -56,7 +56,7 @@ std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Rea
         bits |= std::uint64_t(_mm256_movemask_pd(_mm256_cmp_pd(d2, r, _CMP_LT_OQ))) << b;
     }
 #else
-    for (int b = 0; b < 64; ++b) {
+    for (int b = 0; b < lanes; ++b) {
         const Real ex = xi - x[b], ey = yi - y[b], ez = zi - z[b];
         bits |= std::uint64_t(ex * ex + ey * ey + ez * ez < r2) << b;
     }
@@ -81,6 +81,7 @@ void CellCandidates::gather(const UniformGrid& grid, const std::array<std::int32
             }
     const std::size_t room = 64 * words();
     if (index.size() < room) x.resize(room), y.resize(room), z.resize(room), index.resize(room);
+    const std::size_t padded = (count + 3) / 4 * 4;
     const Real *gx = grid.sortedCoords(0).data(), *gy = grid.sortedCoords(1).data(), *gz = grid.sortedCoords(2).data();
     const std::uint32_t* sorted = grid.sortedIndices().data();
     // Cells hold a handful of points: plain loops beat memcpy calls here.
@@ -88,7 +89,7 @@ void CellCandidates::gather(const UniformGrid& grid, const std::array<std::int32
     for (int c = 0; c != cells; ++c)
         for (std::size_t s = from[c]; s != to[c]; ++s, ++k)
             x[k] = gx[s], y[k] = gy[s], z[k] = gz[s], index[k] = sorted[s];
-    for (; k != room; ++k) x[k] = y[k] = z[k] = std::numeric_limits<Real>::max();
+    for (; k != padded; ++k) x[k] = y[k] = z[k] = std::numeric_limits<Real>::max();
 }
 
 void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
@@ -328,8 +329,8 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
                     std::size_t found = 0;
                     for (std::size_t w = 0; w < words; ++w) {
                         const std::size_t base = 64 * w;
-                        std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base,
-                                                      cand.z.data() + base, xi, yi, zi, r2);
+                        std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base, cand.z.data() + base,
+                                                      int(std::min<std::size_t>(64, m - base)), xi, yi, zi, r2);
                         for (; bits; bits &= bits - 1) {
                             const std::uint32_t j = cj[base + std::size_t(__builtin_ctzll(bits))];
                             if (j != self) dst[found++] = j;

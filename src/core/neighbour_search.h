@@ -131,13 +131,14 @@ private:
 void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
                std::vector<std::pair<std::uint64_t, std::uint32_t>>& scratch);
 
-/// Bit b of the result: whether candidate b of the 64 from x, y, z lies closer than sqrt(r2) to (xi, yi, zi). The
-/// arrays hold 64 values (past the last candidate, values too far for any test).
-std::uint64_t closer64(const Real* x, const Real* y, const Real* z, Real xi, Real yi, Real zi, Real r2);
+/// Bit b of the result: whether candidate b < lanes (at most 64) from x, y, z lies closer than sqrt(r2) to (xi, yi,
+/// zi). The arrays hold lanes values rounded up to a multiple of 4 (past the last candidate, values too far for any
+/// test); only those are read: a cell's last word of candidates is mostly empty.
+std::uint64_t closer64(const Real* x, const Real* y, const Real* z, int lanes, Real xi, Real yi, Real zi, Real r2);
 
 /// The points of the 27 cells of a grid around one cell (given by its coordinates, so it may be a cell of another
 /// grid with the same cell size), coordinates apart so that closer64 tests them 64 at a time; past `count`, up to
-/// a multiple of 64, values too far for any test. Kept between gathers: it only grows.
+/// a multiple of 4, values too far for any test. Kept between gathers: it only grows.
 struct CellCandidates {
     std::vector<Real> x, y, z;
     std::vector<std::uint32_t> index;  // each point's index in the set the grid was built from
