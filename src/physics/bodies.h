@@ -65,10 +65,17 @@ struct BoundaryParticles {
     BoundaryParticles(const std::vector<BoundaryBody>& bodies, const std::vector<BodySetup>& setups);
     /// Places the moving bodies' particles where their motion has them at time t.
     void moveTo(Real t);
+    /// The rotation centre of body `id` at time t [m].
+    Vec3 centre(std::uint32_t id, Real t) const { return motion[id].centre + motion[id].offset(t); }
     /// From the rotation centre of particle k's body at time t to particle k [m].
-    Vec3 leverArm(std::size_t k, Real t) const {
-        const BodyMotion& m = motion[body[k]];
-        return x[k] - (m.centre + m.offset(t));
+    Vec3 leverArm(std::size_t k, Real t) const { return x[k] - centre(body[k], t); }
+    /// The body of every boundary particle in [begin, end) (indices into this set), or kSeveralBodies.
+    static constexpr std::uint32_t kSeveralBodies = ~std::uint32_t(0);
+    std::uint32_t commonBody(const std::uint32_t* begin, const std::uint32_t* end) const {
+        const std::uint32_t id = begin == end ? 0 : body[*begin];
+        for (const std::uint32_t* k = begin; k != end; ++k)
+            if (body[*k] != id) return kSeveralBodies;
+        return id;
     }
     /// The particles of the moving bodies, body by body (particle caches carry them; static ones are in the sample),
     /// where they are now or, given a time, where their motion has them then.
@@ -88,6 +95,13 @@ struct BodyLoads {
         const std::uint32_t id = b.body[k];
         impulse[id] += j;
         angularImpulse[id] += b.leverArm(k, t).cross(j);
+    }
+    /// The impulse j [N s] that body `id` takes from one fluid particle at x through its boundary neighbours, each
+    /// push along the line from the neighbour to x: a push's moment does not change along its line, so their sum's
+    /// is that of j at x, and the pairs need not be visited one by one.
+    void addFrom(const BoundaryParticles& b, std::uint32_t id, const Vec3& x, const Vec3& j, Real t) {
+        impulse[id] += j;
+        angularImpulse[id] += (x - b.centre(id, t)).cross(j);
     }
     void add(const BodyLoads& other) {
         for (std::size_t id = 0; id < impulse.size(); ++id) {

@@ -106,6 +106,7 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     resizeForRefill(m_boundaryWeights, b.pairs());
     m_boundarySum.resize(n);
     m_bodyRate.resize(n);
+    m_wallBody.resize(n);
     m_gradientSum.resize(n);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         for (std::size_t p = f.first(begin); p < f.first(end); ++p)
@@ -127,6 +128,7 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
             }
             m_boundarySum[i] = boundary;
             m_bodyRate[i] = bodies;
+            m_wallBody[i] = ctx.boundary.commonBody(b.indices.data() + b.first(i), b.indices.data() + b.last(i));
             sum += boundary;
             m_gradientSum[i] = sum;
             const Real denominator = sum.squaredNorm() + squares;
@@ -465,13 +467,18 @@ std::size_t PressureDFSPH::solve(Solve which, StepContext& ctx, ParticleSet& par
 
 void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& particles, const std::vector<Real>& s) const {
     // The solve is linear in the pressures and the positions do not move during it, so the impulse the
-    // boundaries gave the fluid follows from the final pressures. Sequential: a deterministic sum.
+    // boundaries gave the fluid follows from the final pressures. Sequential: a deterministic sum. A particle whose
+    // boundary neighbours are all of one body gives it dt m_i s_i S_i, S_i its pairs' pushes summed once a step.
     const auto& x = particles.x();
     const auto& m = particles.mass();
     const auto& b = ctx.boundaryNeighbours;
     const Real dt = ctx.dt;
     for (std::size_t i = 0; i < particles.size(); ++i) {
-        if (s[i] == 0) continue;
+        if (s[i] == 0 || b.first(i) == b.last(i)) continue;
+        if (m_wallBody[i] != BoundaryParticles::kSeveralBodies) {
+            ctx.loads.addFrom(ctx.boundary, m_wallBody[i], x[i], (dt * m[i] * s[i]) * m_boundarySum[i], ctx.time + dt);
+            continue;
+        }
         for (std::size_t p = b.first(i); p < b.last(i); ++p) {
             const std::uint32_t k = b.indices[p];
             // Impulse on the body: the opposite of what the body gave particle i.

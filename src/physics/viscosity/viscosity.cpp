@@ -349,17 +349,33 @@ void ViscosityMethod::addBoundaryLoads(StepContext& ctx, const ParticleSet& part
     // counting every pass put a floor's mean force at 2.4 times the weight of the chocolate bunny on it.
     if (!firstPass) ctx.loads.subtract(m_passLoads);
     m_passLoads.clear(ctx.loads.impulse.size());
+    // The pushes, each along its pair's line, are summed by particle in parallel; a particle whose boundary
+    // neighbours are all of one body then adds their sum at its position (BodyLoads::addFrom).
     const auto& x = particles.x();
     const auto& v = particles.v();
     const auto& m = particles.mass();
     const auto& b = ctx.boundaryNeighbours;
-    for (std::size_t i = 0; i < particles.size(); ++i)
-        for (std::size_t p = b.first(i); p < b.last(i); ++p) {
-            const std::uint32_t k = b.indices[p];
-            const Vec3 xik = x[i] - ctx.boundary.x[k];
-            const Vec3 j = (-ctx.dt * m[i] * m_boundaryPairs[p] * xik.dot(v[i] - ctx.boundary.v[k])) * xik;
-            m_passLoads.add(ctx.boundary, k, j, ctx.time + ctx.dt);
-        }
+    const Real t = ctx.time + ctx.dt;
+    auto push = [&](std::size_t i, std::size_t p) {
+        const std::uint32_t k = b.indices[p];
+        const Vec3 xik = x[i] - ctx.boundary.x[k];
+        return Vec3((-ctx.dt * m[i] * m_boundaryPairs[p] * xik.dot(v[i] - ctx.boundary.v[k])) * xik);
+    };
+    m_wallImpulse.resize(particles.size());
+    forEachParticle(particles.size(), [&](std::size_t i) {
+        Vec3 j = Vec3::Zero();
+        for (std::size_t p = b.first(i); p < b.last(i); ++p) j += push(i, p);
+        m_wallImpulse[i] = j;
+    });
+    for (std::size_t i = 0; i < particles.size(); ++i) {
+        if (b.first(i) == b.last(i)) continue;
+        const std::uint32_t id = ctx.boundary.commonBody(b.indices.data() + b.first(i), b.indices.data() + b.last(i));
+        if (id != BoundaryParticles::kSeveralBodies)
+            m_passLoads.addFrom(ctx.boundary, id, x[i], m_wallImpulse[i], t);
+        else
+            for (std::size_t p = b.first(i); p < b.last(i); ++p)
+                m_passLoads.add(ctx.boundary, b.indices[p], push(i, p), t);
+    }
     ctx.loads.add(m_passLoads);
 }
 

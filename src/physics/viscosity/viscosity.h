@@ -227,6 +227,7 @@ private:
     std::vector<Real> m_boundaryPairs;
     std::vector<Mat3> m_fluidBlocks;
     std::vector<Real> m_inverseDensity;  // 1 / rho_i of the step, from apply()
+    std::vector<Vec3> m_wallImpulse;  // per particle, the bodies' share of its viscous change (addBoundaryLoads)
     BodyLoads m_passLoads;    // the viscous loads of the latest pass, which a later pass of the step replaces
     std::size_t m_lastStep = 0;
     Real m_lastDt = 0, m_earlierDt = 0;  // the last two steps: scale the warm start
