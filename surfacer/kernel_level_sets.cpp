@@ -150,9 +150,9 @@ std::vector<Ellipsoid> anisotropicKernels(const std::vector<Vec3>& x, Real r) {
                 const CellCandidates& cand = near.candidates;
                 for (std::size_t word = 0; word != cand.words(); ++word) {
                     const std::size_t base = 64 * word;
-                    const std::uint64_t bits =
-                        closer64(cand.x.data() + base, cand.y.data() + base, cand.z.data() + base,
-                                 int(std::min<std::size_t>(64, cand.count - base)), sx[s], sy[s], sz[s], support2);
+                    const std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base,
+                                                        cand.z.data() + base, cand.lanes(word), sx[s], sy[s], sz[s],
+                                                        support2);
                     neighbours += std::size_t(__builtin_popcountll(bits));
                     for (std::size_t k = base; k != base + 64; k += 8) {
                         if (!(bits >> (k - base) & 0xffu)) continue;

@@ -329,8 +329,8 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
                     std::size_t found = 0;
                     for (std::size_t w = 0; w < words; ++w) {
                         const std::size_t base = 64 * w;
-                        std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base, cand.z.data() + base,
-                                                      int(std::min<std::size_t>(64, m - base)), xi, yi, zi, r2);
+                        std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base,
+                                                      cand.z.data() + base, cand.lanes(w), xi, yi, zi, r2);
                         for (; bits; bits &= bits - 1) {
                             const std::uint32_t j = cj[base + std::size_t(__builtin_ctzll(bits))];
                             if (j != self) dst[found++] = j;

@@ -5,6 +5,7 @@
 
 #include "core/types.h"
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <utility>
@@ -147,6 +148,8 @@ struct CellCandidates {
     void gather(const UniformGrid& grid, const std::array<std::int32_t, 3>& cell);
     /// Words of 64 candidates to test.
     std::size_t words() const { return (count + 63) / 64; }
+    /// The candidates in word w, closer64's lanes.
+    int lanes(std::size_t w) const { return int(std::min<std::size_t>(64, count - 64 * w)); }
 };
 
 /// Finds, for every query point i, the target points j with |x_i - x_j| < radius. With sameSet the query
