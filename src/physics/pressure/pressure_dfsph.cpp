@@ -106,7 +106,6 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     resizeForRefill(m_boundaryWeights, b.pairs());
     m_boundarySum.resize(n);
     m_bodyRate.resize(n);
-    m_wallBody.resize(n);
     m_gradientSum.resize(n);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
         for (std::size_t p = f.first(begin); p < f.first(end); ++p)
@@ -128,7 +127,6 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
             }
             m_boundarySum[i] = boundary;
             m_bodyRate[i] = bodies;
-            m_wallBody[i] = ctx.boundary.commonBody(b.indices.data() + b.first(i), b.indices.data() + b.last(i));
             sum += boundary;
             m_gradientSum[i] = sum;
             const Real denominator = sum.squaredNorm() + squares;
@@ -475,8 +473,9 @@ void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& partic
     const Real dt = ctx.dt;
     for (std::size_t i = 0; i < particles.size(); ++i) {
         if (s[i] == 0 || b.first(i) == b.last(i)) continue;
-        if (m_wallBody[i] != BoundaryParticles::kSeveralBodies) {
-            ctx.loads.addFrom(ctx.boundary, m_wallBody[i], x[i], (dt * m[i] * s[i]) * m_boundarySum[i], ctx.time + dt);
+        const std::uint32_t id = ctx.boundary.commonBody(b.indices.data() + b.first(i), b.indices.data() + b.last(i));
+        if (id != BoundaryParticles::kSeveralBodies) {
+            ctx.loads.addFrom(ctx.boundary, id, x[i], (dt * m[i] * s[i]) * m_boundarySum[i], ctx.time + dt);
             continue;
         }
         for (std::size_t p = b.first(i); p < b.last(i); ++p) {

@@ -78,7 +78,6 @@ private:
     // bodies' velocities' share of the density rate, sum_k w_ik v_k . x_ik.
     std::vector<Vec3> m_boundarySum;
     std::vector<Real> m_bodyRate;
-    std::vector<std::uint32_t> m_wallBody;  // the body of all of a particle's boundary neighbours, or kSeveralBodies
     std::vector<Vec3> m_gradientSum;  // G_i: sum_j w_ij x_ij plus the boundary sum
     PressureCoarseSpace m_coarse;
     std::uint64_t m_coarseBuilt = 0;          // the step it was built in
