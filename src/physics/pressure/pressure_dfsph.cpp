@@ -48,7 +48,15 @@ constexpr Real kCoarseCell = 2;
 // at most 8,192 / 4,096 / 2,048 cells: 7.4 + 1.2 / 8.4 + 1.1 / 20.9 + 1.3 products, 1,699 / 1,148 / 1,625 ms.
 constexpr std::size_t kCoarseMaxCells = 4096;
 constexpr std::uint64_t kCoarseRebuild = 8;
-constexpr int kCoarseExpansions = 2;  // see solveMprgp
+
+// When the bound stops a conjugate gradient step before this share of its length, the expansion takes the whole step
+// with every pressure it would make negative set to zero, instead of stopping at the first such particle and taking
+// a projected gradient step from there (see solveMprgp). At a landing's wavefront many particles reach zero in one
+// step, and stopping at the first gave up nearly all of the step for one particle's bound: step_bench's 1M-particle
+// honey blob took 34.5 constant-density products a step over its first ten steps of contact, now 7-8. Taking the
+// whole step whenever the bound stops it at all was slower where the bound stops it late (the buckling anchor 1,067
+// products against 955; at 0.1 891); 0.03 and 0.3 did about as well as 0.1 on Table 2's rows, but not at 1M.
+constexpr Real kProjectedStep = 0.1;
 constexpr std::size_t kCoarseBlock = 4096;  // particles a block of the sums by cell
 
 }  // namespace
@@ -255,8 +263,9 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     // (A = J J^T, J the density rate of a velocity field, -dt J^T the velocity change of pressures), find s >= 0
     // with e <= 0 and s_i e_i = 0; its gradient is G = -e. MPRGP (Dostal & Schoeberl 2005, "Minimizing quadratic
     // functions subject to bound constraints with the rate of convergence and finite termination"): conjugate
-    // gradient steps on the particles under pressure, a projected gradient step when a step would make a pressure
-    // negative, and proportioning steps that give pressure to particles their neighbours compress. The conjugate
+    // gradient steps on the particles under pressure, a projected step when a step would make a pressure negative
+    // (the gradient's, or the conjugate step's own where the bound stops it early: kProjectedStep), and proportioning
+    // steps that give pressure to particles their neighbours compress. The conjugate
     // gradient steps are preconditioned by the DFSPH factor (1 / A_ii) plus, on bodies of many particles, the exact
     // answer within the coarse space's cell-wise constant pressures, both on the particles under pressure. Every
     // product with A costs what one Jacobi sweep does.
@@ -330,11 +339,11 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     // The coarse space's part of the preconditioner on the free particles: the free gradient summed by cell over the
     // particles under pressure (q too, with withQ), solved for the cells' pressures. Its directions move whole cells,
     // and where an impact keeps changing which particles hold pressure they run into the bound more often than the
-    // diagonal's: a honey block landing at 1 m/s took 215 expansion steps with it against 158 without, 576 products
-    // against 481 (test PressureCoarseSpace.ALandingEndsWhereItDoesWithoutInFewerProducts). From a solve's second
-    // expansion on, the diagonal goes on alone: 435 products; the 50k anchor block keeps its 3.50 + 0.75 a step.
-    bool coarse = m_coarse.active();
-    int expansions = 0;
+    // diagonal's. With expansions that stopped at the first particle's bound, a honey block landing at 1 m/s took 576
+    // products with it against 481 without, so a solve dropped it at its second expansion (435); with the projected
+    // steps of kProjectedStep it stays: 372 products against 424 without, 433 when dropped as before (test
+    // PressureCoarseSpace.ALandingEndsNearTheConvergedOneInFewerProducts).
+    const bool coarse = m_coarse.active();
     // The sums by cell: each fixed block of particles sums the runs of particles from one cell (they lie in the
     // grid's cell order, so a cell's come in a few runs), and the runs are added up in the blocks' order, the same on
     // any thread count.
@@ -433,12 +442,21 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
             measured = zqMeasured.tail<3>();
             forEachParticle(n, [&](std::size_t i) { dir[i] = z[i] + coarseAt(i) - beta * dir[i]; });
         } else {
-            // Expansion: up to the bound, then a projected gradient step; conjugate directions start again.
-            if (++expansions == kCoarseExpansions) coarse = false;
-            forEachParticle(n, [&](std::size_t i) {
-                moveOne(i, sums.feasible, dir);
-                z[i] = pressure[i] - std::max<Real>(pressure[i] - kRelaxation * inverseD(i) * free(i), 0);
-            });
+            // Expansion; conjugate directions start again. Where the bound stops the step early, the whole step with
+            // the pressures it would make negative set to zero (kProjectedStep); otherwise up to the bound, then a
+            // projected gradient step. Either way z is the pressures' change, and its product updates e and v.
+            // Unlike the gradient step, the projected conjugate one is not proven to lower the solve's energy; it did
+            // in every one of the 1,800 taken in Table 2's rows and step_bench's 1M blob (e.z + z.q / 2 < 0).
+            if (sums.feasible < kProjectedStep * step) {
+                forEachParticle(n, [&](std::size_t i) {
+                    z[i] = pressure[i] - std::max<Real>(pressure[i] - step * dir[i], 0);
+                });
+            } else {
+                forEachParticle(n, [&](std::size_t i) {
+                    moveOne(i, sums.feasible, dir);
+                    z[i] = pressure[i] - std::max<Real>(pressure[i] - kRelaxation * inverseD(i) * free(i), 0);
+                });
+            }
             measured = multiplyAnd(z, Vec3(Vec3::Zero()), [&](std::size_t i) {
                 moveOne(i, 1, z);
                 return measure(i);
