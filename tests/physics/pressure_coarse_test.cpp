@@ -187,8 +187,8 @@ Landing land(std::int64_t coarseFrom, Real densityError = PressureSettings{}.den
 
 TEST(PressureCoarseSpace, ALandingEndsNearTheConvergedOneInFewerProducts) {
     const Landing plain = land(std::numeric_limits<std::int32_t>::max()), coarse = land(0);
-    // The same landing with both solves a hundred times stricter: the tenth digit of the centroid still moves at a
-    // thousand times (7 um), so this is the landing the solves converge to.
+    // The same landing with both solves a hundred times stricter: a thousand times stricter moves its centroid by at
+    // most 7 um, so this is the landing the solves converge to.
     const Landing converged = land(std::numeric_limits<std::int32_t>::max(), 1e-6);
     std::printf("products %zu without, %zu with the coarse space; centroid heights %.6f / %.6f m (converged %.6f), "
                 "mean compression %.2e / %.2e (%.2e)\n",
@@ -198,7 +198,7 @@ TEST(PressureCoarseSpace, ALandingEndsNearTheConvergedOneInFewerProducts) {
     // the 50k anchor block): 372 products against 424.
     EXPECT_LT(coarse.products, plain.products);
     // Both solves stop at a mean residual of 0.01 % of rest density, so each body may end away from the converged one
-    // by what that residual leaves: measured 0.02 mm without and 0.06 mm with the coarse space, on a 2.5 mm particle
+    // by what that residual leaves: measured 0.02 mm without and 0.07 mm with the coarse space, on a 2.5 mm particle
     // radius. 0.1 mm is 4 % of a radius; the expansions that stopped at the first particle's bound (before
     // kProjectedStep) left both 0.33 mm lower. The mean compression after the particles move (what the linearised
     // solve did not foresee: the converged landing's is 1.7e-4) exceeds the converged one's by at most the solve's

@@ -55,7 +55,8 @@ constexpr std::uint64_t kCoarseRebuild = 8;
 // step, and stopping at the first gave up nearly all of the step for one particle's bound: step_bench's 1M-particle
 // honey blob took 34.5 constant-density products a step over its first ten steps of contact, now 7-8. Taking the
 // whole step whenever the bound stops it at all was slower where the bound stops it late (the buckling anchor 1,067
-// products against 955; at 0.1 891); 0.03 and 0.3 did about as well as 0.1 on Table 2's rows, but not at 1M.
+// products against 891 at 0.1, 955 before). At 0.03 Table 2's rows took about as many as at 0.1 and the 1M blob
+// nearly twice as many; at 0.3 the rows took 5-15 % more.
 constexpr Real kProjectedStep = 0.1;
 constexpr std::size_t kCoarseBlock = 4096;  // particles a block of the sums by cell
 
