@@ -103,6 +103,20 @@ struct BodyLoads {
         impulse[id] += j;
         angularImpulse[id] += (x - b.centre(id, t)).cross(j);
     }
+    /// The pushes of one fluid particle at x on its boundary neighbours [first, last) (indices into b), each along
+    /// the line from the neighbour to x: `total` is their sum, push(n) the n-th. Where the neighbours are all of one
+    /// body, total is added at x (addFrom); otherwise each push where it acts.
+    template <class Push>
+    void addPushes(const BoundaryParticles& b, const std::uint32_t* first, const std::uint32_t* last, const Vec3& x,
+                   const Vec3& total, Real t, Push push) {
+        if (first == last) return;
+        const std::uint32_t id = b.commonBody(first, last);
+        if (id != BoundaryParticles::kSeveralBodies) {
+            addFrom(b, id, x, total, t);
+            return;
+        }
+        for (const std::uint32_t* k = first; k != last; ++k) add(b, *k, push(std::size_t(k - first)), t);
+    }
     void add(const BodyLoads& other) {
         for (std::size_t id = 0; id < impulse.size(); ++id) {
             impulse[id] += other.impulse[id];

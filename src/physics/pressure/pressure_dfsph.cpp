@@ -491,18 +491,14 @@ void PressureDFSPH::addBoundaryLoads(StepContext& ctx, const ParticleSet& partic
     const auto& b = ctx.boundaryNeighbours;
     const Real dt = ctx.dt;
     for (std::size_t i = 0; i < particles.size(); ++i) {
-        if (s[i] == 0 || b.first(i) == b.last(i)) continue;
-        const std::uint32_t id = ctx.boundary.commonBody(b.indices.data() + b.first(i), b.indices.data() + b.last(i));
-        if (id != BoundaryParticles::kSeveralBodies) {
-            ctx.loads.addFrom(ctx.boundary, id, x[i], (dt * m[i] * s[i]) * m_boundarySum[i], ctx.time + dt);
-            continue;
-        }
-        for (std::size_t p = b.first(i); p < b.last(i); ++p) {
-            const std::uint32_t k = b.indices[p];
-            // Impulse on the body: the opposite of what the body gave particle i.
-            const Vec3 j = (dt * m[i] * s[i] * m_boundaryWeights[p]) * (x[i] - ctx.boundary.x[k]);
-            ctx.loads.add(ctx.boundary, k, j, ctx.time + dt);
-        }
+        if (s[i] == 0) continue;
+        const std::size_t first = b.first(i);
+        // Impulse on the body: the opposite of what the body gave particle i.
+        ctx.loads.addPushes(ctx.boundary, b.indices.data() + first, b.indices.data() + b.last(i), x[i],
+                            (dt * m[i] * s[i]) * m_boundarySum[i], ctx.time + dt, [&](std::size_t n) {
+            const std::size_t p = first + n;
+            return Vec3((dt * m[i] * s[i] * m_boundaryWeights[p]) * (x[i] - ctx.boundary.x[b.indices[p]]));
+        });
     }
 }
 

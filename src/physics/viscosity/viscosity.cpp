@@ -350,7 +350,7 @@ void ViscosityMethod::addBoundaryLoads(StepContext& ctx, const ParticleSet& part
     if (!firstPass) ctx.loads.subtract(m_passLoads);
     m_passLoads.clear(ctx.loads.impulse.size());
     // The pushes, each along its pair's line, are summed by particle in parallel; a particle whose boundary
-    // neighbours are all of one body then adds their sum at its position (BodyLoads::addFrom).
+    // neighbours are all of one body then adds their sum at its position (BodyLoads::addPushes).
     const auto& x = particles.x();
     const auto& v = particles.v();
     const auto& m = particles.mass();
@@ -367,15 +367,9 @@ void ViscosityMethod::addBoundaryLoads(StepContext& ctx, const ParticleSet& part
         for (std::size_t p = b.first(i); p < b.last(i); ++p) j += push(i, p);
         m_wallImpulse[i] = j;
     });
-    for (std::size_t i = 0; i < particles.size(); ++i) {
-        if (b.first(i) == b.last(i)) continue;
-        const std::uint32_t id = ctx.boundary.commonBody(b.indices.data() + b.first(i), b.indices.data() + b.last(i));
-        if (id != BoundaryParticles::kSeveralBodies)
-            m_passLoads.addFrom(ctx.boundary, id, x[i], m_wallImpulse[i], t);
-        else
-            for (std::size_t p = b.first(i); p < b.last(i); ++p)
-                m_passLoads.add(ctx.boundary, b.indices[p], push(i, p), t);
-    }
+    for (std::size_t i = 0; i < particles.size(); ++i)
+        m_passLoads.addPushes(ctx.boundary, b.indices.data() + b.first(i), b.indices.data() + b.last(i), x[i],
+                              m_wallImpulse[i], t, [&](std::size_t n) { return push(i, b.first(i) + n); });
     ctx.loads.add(m_passLoads);
 }
 
