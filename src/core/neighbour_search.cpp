@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -41,44 +42,139 @@ std::uint64_t mortonKey(std::int64_t cx, std::int64_t cy, std::int64_t cz) {
 
 std::uint64_t hashSlot(std::uint64_t key, int bits) { return (key * 0x9E3779B97F4A7C15ULL) >> (64 - bits); }
 
+// Whether points lie closer than sqrt(r2) to (px, py, pz): the same squared distance in both versions, so the same
+// neighbours with and without AVX2.
+#if defined(__AVX2__)
+inline int closer4(__m256d px, __m256d py, __m256d pz, __m256d r2, __m256d x, __m256d y, __m256d z) {
+    const __m256d ex = _mm256_sub_pd(px, x), ey = _mm256_sub_pd(py, y), ez = _mm256_sub_pd(pz, z);
+    const __m256d d2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
+    return _mm256_movemask_pd(_mm256_cmp_pd(d2, r2, _CMP_LT_OQ));
+}
+#else
+inline bool closer1(Real px, Real py, Real pz, Real r2, Real x, Real y, Real z) {
+    const Real ex = px - x, ey = py - y, ez = pz - z;
+    return ex * ex + ey * ey + ez * ez < r2;
+}
+#endif
+
+#if defined(__AVX2__)
+// The byte shuffle that packs the 32-bit lanes set in a 4-bit mask to the front.
+struct PackTable {
+    alignas(16) std::uint8_t bytes[16][16];
+    PackTable() {
+        for (int m = 0; m < 16; ++m) {
+            int k = 0;
+            for (int lane = 0; lane < 4; ++lane)
+                if (m >> lane & 1)
+                    for (int b = 0; b < 4; ++b) bytes[m][k++] = std::uint8_t(4 * lane + b);
+            for (; k < 16; ++k) bytes[m][k] = 0x80;
+        }
+    }
+};
+const PackTable kPack;
+#endif
+
+// Appends to dst the indices idx[s] of the points s in [from, to) closer than sqrt(r2) to p, but for s == skip, and
+// returns how many. dst needs room for to - from + 4: whole groups of four are stored.
+std::size_t appendCloser(const Real* x, const Real* y, const Real* z, const std::uint32_t* idx, std::size_t from,
+                         std::size_t to, const Vec3& p, Real r2, std::size_t skip, std::uint32_t* dst) {
+    std::size_t found = 0;
+#if defined(__AVX2__)
+    const __m256d px = _mm256_set1_pd(p.x()), py = _mm256_set1_pd(p.y()), pz = _mm256_set1_pd(p.z());
+    const __m256d r = _mm256_set1_pd(r2);
+    const auto closer = [&](__m256d ex, __m256d ey, __m256d ez) { return closer4(px, py, pz, r, ex, ey, ez); };
+    const auto append = [&](std::size_t s, int bits, __m128i ids) {
+        if (skip - s < 4) bits &= ~(1 << (skip - s));
+        const __m128i order = _mm_load_si128(reinterpret_cast<const __m128i*>(kPack.bytes[bits]));
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst + found), _mm_shuffle_epi8(ids, order));
+        found += std::size_t(__builtin_popcount(unsigned(bits)));
+    };
+    std::size_t s = from;
+    for (; s + 4 <= to; s += 4)
+        append(s, closer(_mm256_loadu_pd(x + s), _mm256_loadu_pd(y + s), _mm256_loadu_pd(z + s)),
+               _mm_loadu_si128(reinterpret_cast<const __m128i*>(idx + s)));
+    if (s < to) {  // the last one to three points, loaded under a mask: the arrays end at `to` or soon after
+        const __m256i lanes = _mm256_cmpgt_epi64(_mm256_set1_epi64x(std::int64_t(to - s)), _mm256_set_epi64x(3, 2, 1, 0));
+        const int valid = (1 << (to - s)) - 1;
+        append(s,
+               closer(_mm256_maskload_pd(x + s, lanes), _mm256_maskload_pd(y + s, lanes),
+                      _mm256_maskload_pd(z + s, lanes)) & valid,
+               _mm_maskload_epi32(reinterpret_cast<const int*>(idx + s),
+                                  _mm_cmpgt_epi32(_mm_set1_epi32(int(to - s)), _mm_set_epi32(3, 2, 1, 0))));
+    }
+#else
+    for (std::size_t s = from; s != to; ++s) {
+        dst[found] = idx[s];
+        found += closer1(p.x(), p.y(), p.z(), r2, x[s], y[s], z[s]) && s != skip;
+    }
+#endif
+    return found;
+}
+
 }  // namespace
 
-// The same squared distance in both versions, so the same neighbours.
 std::uint64_t closer64(const Real* x, const Real* y, const Real* z, int lanes, Real xi, Real yi, Real zi, Real r2) {
     std::uint64_t bits = 0;
 #if defined(__AVX2__)
     const __m256d px = _mm256_set1_pd(xi), py = _mm256_set1_pd(yi), pz = _mm256_set1_pd(zi), r = _mm256_set1_pd(r2);
-    for (int b = 0; b < lanes; b += 4) {
-        const __m256d ex = _mm256_sub_pd(px, _mm256_loadu_pd(x + b)), ey = _mm256_sub_pd(py, _mm256_loadu_pd(y + b));
-        const __m256d ez = _mm256_sub_pd(pz, _mm256_loadu_pd(z + b));
-        const __m256d d2 =
-            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
-        bits |= std::uint64_t(_mm256_movemask_pd(_mm256_cmp_pd(d2, r, _CMP_LT_OQ))) << b;
-    }
+    for (int b = 0; b < lanes; b += 4)
+        bits |= std::uint64_t(closer4(px, py, pz, r, _mm256_loadu_pd(x + b), _mm256_loadu_pd(y + b),
+                                      _mm256_loadu_pd(z + b)))
+                << b;
 #else
-    for (int b = 0; b < lanes; ++b) {
-        const Real ex = xi - x[b], ey = yi - y[b], ez = zi - z[b];
-        bits |= std::uint64_t(ex * ex + ey * ey + ez * ez < r2) << b;
-    }
+    for (int b = 0; b < lanes; ++b) bits |= std::uint64_t(closer1(xi, yi, zi, r2, x[b], y[b], z[b])) << b;
 #endif
     return bits;
 }
 
-void CellCandidates::gather(const UniformGrid& grid, const std::array<std::int32_t, 3>& cell) {
-    std::size_t from[27], to[27];
-    int cells = 0;
+void CellRuns::find(const UniformGrid& grid, const std::array<std::int32_t, 3>& cell) {
     count = 0;
     if (!grid.mayHoldAround(cell)) return;  // a fluid cell far from every wall: no lookups
-    for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-            for (int dx = -1; dx <= 1; ++dx) {
-                const std::int64_t found = grid.findCell(cell[0] + dx, cell[1] + dy, cell[2] + dz);
+    const int f = grid.fastAxis();
+    const int outer = f == 2 ? 1 : 2, inner = f == 0 ? 1 : 0;  // of the other two axes, z before y before x
+    std::int64_t c[3];
+    for (int d0 = -1; d0 <= 1; ++d0)
+        for (int d1 = -1; d1 <= 1; ++d1) {
+            std::int64_t last = -2;
+            for (int d2 = -1; d2 <= 1; ++d2) {
+                c[outer] = cell[std::size_t(outer)] + d0;
+                c[inner] = cell[std::size_t(inner)] + d1;
+                c[f] = cell[std::size_t(f)] + d2;
+                const std::int64_t found = grid.findCell(c[0], c[1], c[2]);
                 if (found < 0) continue;
-                from[cells] = grid.cellBegin(std::size_t(found));
-                to[cells] = grid.cellBegin(std::size_t(found) + 1);
-                count += to[cells] - from[cells];
-                ++cells;
+                if (found == last + 1) {
+                    to[count - 1] = grid.cellBegin(std::size_t(found) + 1);
+                } else {
+                    from[count] = grid.cellBegin(std::size_t(found));
+                    to[count] = grid.cellBegin(std::size_t(found) + 1);
+                    ++count;
+                }
+                last = found;
             }
+        }
+}
+
+std::size_t CellRuns::points() const {
+    std::size_t n = 0;
+    for (int r = 0; r != count; ++r) n += to[r] - from[r];
+    return n;
+}
+
+std::size_t CellRuns::positionOf(std::size_t s) const {
+    std::size_t before = 0;
+    for (int r = 0; r != count; before += to[r] - from[r], ++r)
+        if (from[r] <= s && s < to[r]) return before + (s - from[r]);
+    throw std::logic_error("CellRuns::positionOf: the point is in none of the runs");
+}
+
+void CellCandidates::gather(const UniformGrid& grid, const std::array<std::int32_t, 3>& cell) {
+    CellRuns runs;
+    runs.find(grid, cell);
+    gather(grid, runs);
+}
+
+void CellCandidates::gather(const UniformGrid& grid, const CellRuns& runs) {
+    count = runs.points();
     const std::size_t room = 64 * words();
     if (index.size() < room) x.resize(room), y.resize(room), z.resize(room), index.resize(room);
     const std::size_t padded = (count + 3) / 4 * 4;
@@ -86,8 +182,8 @@ void CellCandidates::gather(const UniformGrid& grid, const std::array<std::int32
     const std::uint32_t* sorted = grid.sortedIndices().data();
     // Cells hold a handful of points: plain loops beat memcpy calls here.
     std::size_t k = 0;
-    for (int c = 0; c != cells; ++c)
-        for (std::size_t s = from[c]; s != to[c]; ++s, ++k)
+    for (int r = 0; r != runs.count; ++r)
+        for (std::size_t s = runs.from[r]; s != runs.to[r]; ++s, ++k)
             x[k] = gx[s], y[k] = gy[s], z[k] = gz[s], index[k] = sorted[s];
     for (; k != padded; ++k) x[k] = y[k] = z[k] = std::numeric_limits<Real>::max();
 }
@@ -152,6 +248,7 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
         Box(Vec3::Constant(big), Vec3::Constant(-big)),
         [](const Box& a, const Box& b) { return Box(a.first.cwiseMin(b.first), a.second.cwiseMax(b.second)); });
     m_rowOrder = false;
+    m_fastAxis = 0;
     if (box.first.x() <= box.second.x())
         chooseOrder(n, {std::int64_t(box.first.x()), std::int64_t(box.first.y()), std::int64_t(box.first.z())},
                     {std::int64_t(box.second.x()), std::int64_t(box.second.y()), std::int64_t(box.second.z())});
@@ -234,6 +331,7 @@ void UniformGrid::chooseOrder(std::size_t n, const std::array<std::int64_t, 3>& 
                      [&](int a, int b) { return m_rowSize[std::size_t(a)] < m_rowSize[std::size_t(b)]; });
     m_rowOrder = 3 * n <= m_slabPoints * std::size_t(m_rowSize[std::size_t(axes[2])]);
     if (!m_rowOrder) return;
+    m_fastAxis = axes[0];
     m_rowMin = lo;
     int shift = 0;
     for (int a : axes) {
@@ -294,7 +392,11 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     const Real r2 = radius * radius;
     const auto& qSorted = queryGrid.sortedIndices();
 
-    tbb::enumerable_thread_specific<CellCandidates> scratch;
+    if (sameSet && &queryGrid != &targetGrid)
+        throw std::logic_error("findNeighbours: one set searched against itself needs one grid");
+    const Real *tx = targetGrid.sortedCoords(0).data(), *ty = targetGrid.sortedCoords(1).data();
+    const Real* tz = targetGrid.sortedCoords(2).data();
+    const std::uint32_t* tSorted = targetGrid.sortedIndices().data();
 
     // One pass: chunks of query cells write their particles' lists into their own buffers (fixed chunk
     // boundaries, so the result is the same for any thread count); a second, cheap pass copies each list
@@ -308,34 +410,40 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     auto& chunkOf = out.scratch.chunkOf;
     auto& localStart = out.scratch.localStart;
     count.resize(n), chunkOf.resize(n), localStart.resize(n);
+    // In row order the runs along the fast axis are long and are tested where they lie; in Z order cells along x
+    // mostly lie apart, and short runs cost more in their ends than a copy into one run (CellCandidates).
+    const bool copy = !targetGrid.rowOrder();
+    tbb::enumerable_thread_specific<CellCandidates> scratch;
     parallelRange(chunks, 1, n, [&](const auto& range) {
+        CellRuns runs;
         CellCandidates& cand = scratch.local();
         for (std::size_t chunk = range.begin(); chunk != range.end(); ++chunk) {
             auto& buffer = buffers[chunk];  // never shrunk: its size is room, the lists fill it from the start
             std::size_t used = 0;
             const std::size_t lastCell = std::min(cells, (chunk + 1) * kCellsPerChunk);
             for (std::size_t c = chunk * kCellsPerChunk; c < lastCell; ++c) {
-                cand.gather(targetGrid, queryGrid.cellCoords(c));
-                const std::size_t m = cand.count, words = cand.words();
-                const std::uint32_t* cj = cand.index.data();
-                for (std::size_t s = queryGrid.cellBegin(c); s < queryGrid.cellBegin(c + 1); ++s) {
+                runs.find(targetGrid, queryGrid.cellCoords(c));
+                const std::size_t first = queryGrid.cellBegin(c), room = runs.points() + 4;
+                // Where the query's own point s lies among the candidates: in a set's own grid, s itself.
+                std::size_t self = sameSet ? first : SIZE_MAX;
+                const Real *cx = tx, *cy = ty, *cz = tz;
+                const std::uint32_t* ci = tSorted;
+                if (copy) {
+                    cand.gather(targetGrid, runs);
+                    cx = cand.x.data(), cy = cand.y.data(), cz = cand.z.data(), ci = cand.index.data();
+                    if (sameSet) self = runs.positionOf(first);
+                }
+                for (std::size_t s = first; s < queryGrid.cellBegin(c + 1); ++s, self += sameSet) {
                     const std::uint32_t i = qSorted[s];
-                    const Real xi = queryX[i].x(), yi = queryX[i].y(), zi = queryX[i].z();
-                    const std::uint32_t self = sameSet ? i : UINT32_MAX;
-                    // The distance test 64 candidates at a time, one bit each; then only the neighbours are
-                    // visited, in candidate order.
-                    if (buffer.size() < used + m) buffer.resize(std::max(2 * buffer.size(), used + m));
+                    if (buffer.size() < used + room) buffer.resize(std::max(2 * buffer.size(), used + room));
                     std::uint32_t* dst = buffer.data() + used;
                     std::size_t found = 0;
-                    for (std::size_t w = 0; w < words; ++w) {
-                        const std::size_t base = 64 * w;
-                        std::uint64_t bits = closer64(cand.x.data() + base, cand.y.data() + base,
-                                                      cand.z.data() + base, cand.lanes(w), xi, yi, zi, r2);
-                        for (; bits; bits &= bits - 1) {
-                            const std::uint32_t j = cj[base + std::size_t(__builtin_ctzll(bits))];
-                            if (j != self) dst[found++] = j;
-                        }
-                    }
+                    if (copy)
+                        found = appendCloser(cx, cy, cz, ci, 0, cand.count, queryX[i], r2, self, dst);
+                    else
+                        for (int k = 0; k < runs.count; ++k)
+                            found += appendCloser(cx, cy, cz, ci, runs.from[k], runs.to[k], queryX[i], r2, self,
+                                                  dst + found);
                     chunkOf[i] = std::uint32_t(chunk);
                     localStart[i] = std::uint32_t(used);
                     count[i] = std::uint32_t(found);
@@ -350,10 +458,13 @@ void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& query
     for (std::size_t i = 0; i < n; ++i) out.offsets[i + 1] = out.offsets[i] + count[i];
     resizeForRefill(out.indices, out.offsets[n]);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i != end; ++i) {
-            const std::uint32_t* from = buffers[chunkOf[i]].data() + localStart[i];
-            std::uint32_t* to = out.indices.data() + out.offsets[i];
-            for (std::uint32_t k = 0; k < count[i]; ++k) to[k] = from[k];  // a few dozen: no memcpy call
+        // Particles whose lists follow each other in one buffer (all of a chunk's, where the particles are in the
+        // grid's order) are copied in one go.
+        for (std::size_t i = begin, j; i != end; i = j) {
+            for (j = i + 1; j != end && chunkOf[j] == chunkOf[i] && localStart[j] == localStart[j - 1] + count[j - 1];)
+                ++j;
+            std::memcpy(out.indices.data() + out.offsets[i], buffers[chunkOf[i]].data() + localStart[i],
+                        (out.offsets[j] - out.offsets[i]) * sizeof(std::uint32_t));
         }
     });
 }

@@ -98,6 +98,9 @@ public:
     bool dense() const { return !m_denseCells.empty(); }
     /// Whether the cells are in row order rather than Z order.
     bool rowOrder() const { return m_rowOrder; }
+    /// The axis along which neighbouring cells follow each other in the sorted order where both hold points: in row
+    /// order the fastest, in Z order x (the lowest bit of a Morton key is x's, so half of such cells do).
+    int fastAxis() const { return m_fastAxis; }
 
 private:
     /// Chooses the cells' order for a build of n points whose cells span [lo, hi].
@@ -108,6 +111,7 @@ private:
     Real m_cellSize;
     std::size_t m_slabPoints;
     bool m_rowOrder = false;
+    int m_fastAxis = 0;
     std::array<std::int64_t, 3> m_rowMin{}, m_rowSize{};  // row order: the box the keys cover
     std::array<int, 3> m_rowShift{};                      // row order: where each axis's offset in the box goes
     std::vector<std::uint32_t> m_sorted;
@@ -138,14 +142,29 @@ void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
 std::uint64_t closer64(const Real* x, const Real* y, const Real* z, int lanes, Real xi, Real yi, Real zi, Real r2);
 
 /// The points of the 27 cells of a grid around one cell (given by its coordinates, so it may be a cell of another
-/// grid with the same cell size), coordinates apart so that closer64 tests them 64 at a time; past `count`, up to
-/// a multiple of 4, values too far for any test. Kept between gathers: it only grows.
+/// grid with the same cell size) as runs of the grid's sorted points: cells z slowest, then y, x fastest (the grid's
+/// fast axis fastest where it is not x), and cells that follow each other in the sorted order joined into one run.
+struct CellRuns {
+    std::size_t from[27], to[27];
+    int count = 0;
+
+    void find(const UniformGrid& grid, const std::array<std::int32_t, 3>& cell);
+    /// How many points the runs hold.
+    std::size_t points() const;
+    /// Where sorted point s, which one of the runs holds, comes among the runs' points.
+    std::size_t positionOf(std::size_t s) const;
+};
+
+/// The points of the 27 cells of a grid around one cell, coordinates apart so that closer64 tests them 64 at a time;
+/// past `count`, up to a multiple of 4, values too far for any test. Kept between gathers: it only grows.
 struct CellCandidates {
     std::vector<Real> x, y, z;
     std::vector<std::uint32_t> index;  // each point's index in the set the grid was built from
     std::size_t count = 0;
 
     void gather(const UniformGrid& grid, const std::array<std::int32_t, 3>& cell);
+    /// The points of these runs of the grid's, in their order.
+    void gather(const UniformGrid& grid, const CellRuns& runs);
     /// Words of 64 candidates to test.
     std::size_t words() const { return (count + 63) / 64; }
     /// The candidates in word w, closer64's lanes.
@@ -153,8 +172,8 @@ struct CellCandidates {
 };
 
 /// Finds, for every query point i, the target points j with |x_i - x_j| < radius. With sameSet the query
-/// and target are one set and i is not its own neighbour. Both grids must have cell size >= radius and be
-/// built from queryX and targetX respectively.
+/// and target are one set (and one grid) and i is not its own neighbour. Both grids must have cell size >= radius and
+/// be built from queryX and targetX respectively. Each list is in CellRuns' order of the target's points.
 void findNeighbours(const UniformGrid& queryGrid, const std::vector<Vec3>& queryX, const UniformGrid& targetGrid,
                     const std::vector<Vec3>& targetX, Real radius, bool sameSet, NeighbourList& out);
 
