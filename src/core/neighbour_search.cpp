@@ -47,7 +47,8 @@ std::uint64_t hashSlot(std::uint64_t key, int bits) { return (key * 0x9E3779B97F
 #if defined(__AVX2__)
 inline int closer4(__m256d px, __m256d py, __m256d pz, __m256d r2, __m256d x, __m256d y, __m256d z) {
     const __m256d ex = _mm256_sub_pd(px, x), ey = _mm256_sub_pd(py, y), ez = _mm256_sub_pd(pz, z);
-    const __m256d d2 = _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
+    const __m256d d2 =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ex, ex), _mm256_mul_pd(ey, ey)), _mm256_mul_pd(ez, ez));
     return _mm256_movemask_pd(_mm256_cmp_pd(d2, r2, _CMP_LT_OQ));
 }
 #else
@@ -94,7 +95,8 @@ std::size_t appendCloser(const Real* x, const Real* y, const Real* z, const std:
         append(s, closer(_mm256_loadu_pd(x + s), _mm256_loadu_pd(y + s), _mm256_loadu_pd(z + s)),
                _mm_loadu_si128(reinterpret_cast<const __m128i*>(idx + s)));
     if (s < to) {  // the last one to three points, loaded under a mask: the arrays end at `to` or soon after
-        const __m256i lanes = _mm256_cmpgt_epi64(_mm256_set1_epi64x(std::int64_t(to - s)), _mm256_set_epi64x(3, 2, 1, 0));
+        const __m256i lanes =
+            _mm256_cmpgt_epi64(_mm256_set1_epi64x(std::int64_t(to - s)), _mm256_set_epi64x(3, 2, 1, 0));
         const int valid = (1 << (to - s)) - 1;
         append(s,
                closer(_mm256_maskload_pd(x + s, lanes), _mm256_maskload_pd(y + s, lanes),

@@ -121,6 +121,18 @@ TEST(NeighbourSearch, EmptyInputs) {
     EXPECT_EQ(nl.pairs(), 0u);
 }
 
+TEST(NeighbourSearch, ASetSearchedAgainstItselfNeedsOneGrid) {
+    // The search leaves a point out of its own list by its place in the grid's sorted order, which only the one grid
+    // the set was sorted into gives.
+    const auto x = randomPoints(100, Vec3::Zero(), Vec3::Ones(), 12);
+    UniformGrid a(0.2), b(0.2);
+    a.build(x);
+    b.build(x);
+    NeighbourList nl;
+    EXPECT_THROW(findNeighbours(a, x, b, x, 0.2, true, nl), std::logic_error);
+    EXPECT_NO_THROW(findNeighbours(a, x, b, x, 0.2, false, nl));
+}
+
 TEST(NeighbourSearch, PointsExactlyOnCellFaces) {
     // Lattice points at multiples of the radius sit on cell boundaries; pairs at exactly the radius are out.
     std::vector<Vec3> x;
