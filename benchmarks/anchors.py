@@ -9,8 +9,10 @@ is built outside this repository (../shared/anchors/README.md says how); ganache
 
 Environment: GANACHE (default build/src/ganache), METRICS (default build/benchmarks/anchor_metrics), THREADS
 (default 1), REPS (default 2), OUT (default out/anchors), VARIANTS (ganache scene variants, default "default"; the
-anchors also have "matched"). Runs are interleaved (SPlisHSPlasH, then each ganache variant, per repetition), so a
-change of machine load hits both. The reference for accuracy is ganache at tight tolerances and fixed 0.5 ms steps
+anchors also have "matched"), PIN (a CPU list for `taskset -c`: the timed runs of both programs stay on those cores;
+with THREADS=1 an unpinned run was at times 35 % slower on this project's 2-core machine, on every other launch in one
+series, which runs by turns can hand to one program). Runs are interleaved (SPlisHSPlasH, then each ganache variant, per
+repetition), so a change of machine load hits both. The reference for accuracy is ganache at tight tolerances and fixed 0.5 ms steps
 (run once per scene, not timed); errors are the relative differences of the spread and of the centroid height.
 """
 import glob
@@ -32,6 +34,7 @@ THREADS = int(os.environ.get("THREADS", "1"))
 REPS = int(os.environ.get("REPS", "2"))
 OUT = os.path.abspath(os.environ.get("OUT", os.path.join(ROOT, "out", "anchors")))
 VARIANTS = os.environ.get("VARIANTS", "default").split()
+PIN = os.environ.get("PIN")
 SCENES = sys.argv[1:] or ["block8k_01", "buckling", "block50k"]
 
 
@@ -50,12 +53,16 @@ def metrics(path, radius, rho0, mass):
     return json.loads(out)
 
 
+def pinned(command):
+    return ["taskset", "-c", PIN] + command if PIN else command
+
+
 def run_ganache(scene_file, out, threads):
     base = [GANACHE, None, scene_file, "--out", out, "--quality", "final", "--threads", str(threads),
             "--skip-resource-check"]
     subprocess.run([base[0], "sample"] + base[2:], check=True, capture_output=True)
     start = time.monotonic()
-    subprocess.run([base[0], "simulate"] + base[2:], check=True, capture_output=True)
+    subprocess.run(pinned([base[0], "simulate"] + base[2:]), check=True, capture_output=True)
     wall = time.monotonic() - start
     report = json.load(open(os.path.join(out, "report.json")))
     steps = report["steps"]
@@ -82,7 +89,7 @@ def run_sph(scene, out, threads):
                         os.path.join(out, "warmup"), scene_file], env=env, capture_output=True)
         open(marker, "w").close()
     start = time.monotonic()
-    log = subprocess.run([SPH, "--no-gui", "--no-initial-pause", "--output-dir", out, scene_file], env=env,
+    log = subprocess.run(pinned([SPH, "--no-gui", "--no-initial-pause", "--output-dir", out, scene_file]), env=env,
                          capture_output=True, text=True).stdout
     wall = time.monotonic() - start
     average = {k: float(v) for k, v in re.findall(r"Average time: (.+?): ([\d.eE+-]+) ms", log)}
