@@ -1,5 +1,6 @@
 // The solvers' inner loops on their own: one viscous product (I - dt A) v and one pressure product (a velocity change
-// and a density rate) per iteration, on a jittered lattice block in the grid's cell order, at 8k, 50k, 200k and 1M
+// and a density rate) per iteration, and the viscous pairs' weights once a step (`viscousWeights`), on a jittered
+// lattice block in the grid's cell order, at 8k, 50k, 200k and 1M
 // particles on 1 and 2 threads; beside them the machine's streaming bandwidth (a triad over 256 MiB arrays), so that
 // each product's cost can be set against the time its bytes take to move; and the viscous product alone on input rows
 // that no thread rewrites between passes (`viscousKeptRows`), which shows what two threads lose to each other's fresh
@@ -134,6 +135,35 @@ void pressure(benchmark::State& state) {
     setCounters(state, b, productBytes(b, 8, 24) + productBytes(b, 24, 8));
 }
 
+// The viscous pairs' weights and the fluid's diagonal blocks, which every step computes once before its viscosity
+// solve, with the same made-up gradients, masses and densities for every pair (the cost does not depend on them).
+void viscousWeights(benchmark::State& state) {
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(1)));
+    const Block b = block(std::size_t(state.range(0)));
+    const std::vector<Real> gradient(b.pairs.pairs(), -1e3), mass(b.x.size(), 8e-3), inverseDensity(b.x.size(), 1e-3);
+    sweeps::ViscousWeightTerms terms;
+    terms.gradient = gradient.data();
+    terms.mass = mass.data();
+    terms.inverseDensity = inverseDensity.data();
+    terms.muConstant = 10;
+    terms.c = 5;
+    terms.eps = 0.01 * 16 * kRadius * kRadius;
+    terms.inverseSpacing2 = 1 / (4 * kRadius * kRadius);
+    terms.linear = 0.1;
+    terms.quadratic = 0.01;
+    sweeps::PairWeights weights(b.pairs.pairs());
+    std::vector<Mat3> blocks(b.x.size());
+    for (auto _ : state) {
+        forEachBlock(b.x.size(), [&](std::size_t begin, std::size_t end) {
+            sweeps::viscousWeights(begin, end, b.pairs, b.xRows.data(), terms, weights.data(), blocks.data());
+        });
+        benchmark::DoNotOptimize(weights.data());
+    }
+    // the lists, each pair's gradient in and weight out; each particle's row, mass, density and block
+    setCounters(state, b, double(b.x.size()) * (8 + 32 + 16 + 72) +
+                              double(b.pairs.pairs()) * double(4 + 8 + sizeof(sweeps::PairWeight)));
+}
+
 // a = b + s c over arrays far larger than the caches: what the memory system streams.
 void triad(benchmark::State& state) {
     tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(0)));
@@ -154,6 +184,7 @@ void triad(benchmark::State& state) {
 BENCHMARK(viscous)->ArgsProduct({{8000, 50653, 195112, 1000000}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(viscousKeptRows)->ArgsProduct({{8000, 50653}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(pressure)->ArgsProduct({{8000, 50653, 195112, 1000000}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(viscousWeights)->ArgsProduct({{8000, 50653, 1000000}, {1, 2}})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(triad)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 BENCHMARK_MAIN();

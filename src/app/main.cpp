@@ -118,7 +118,7 @@ int main(int argc, char** argv) {
     studyCmd->add_flag("--quick", study.quick, "shorter runs and two settings per knob (a few minutes on 2 cores)");
     studyCmd->add_option("--out", study.out, "output folder (default: out/study; the committed study is docs/study)");
     studyCmd->add_option("--scenes", study.scenes, "folder of the study's scenes (default: scenes/study)");
-    studyCmd->add_option("--case", study.cases, "only these cases: spinning_cube, couette, viscous_bunny");
+    studyCmd->add_option("--case", study.cases, "only these cases: spinning_cube, couette, viscous_bunny, stiff_arm");
     studyCmd->add_option("--threads", study.threads, "worker threads (default 0: every core)")->check(threadCount);
 
     FarmOptions farm;

@@ -465,24 +465,33 @@ TEST(Cli, QuickStudyWritesItsTableChartsAndReport) {
         const std::size_t third = line.find(',', line.find(',', line.find(',') + 1) + 1);
         rows[line.substr(0, third)] = line;
     }
-    // Three cases x ten knobs x two settings, and the bunny's reference run.
-    EXPECT_EQ(rows.size(), 3u * 10u * 2u + 1u);
-    for (const char* c : {"spinning_cube", "couette", "viscous_bunny"}) {
+    // Four cases x eleven knobs x two settings, and the bunny's reference run.
+    EXPECT_EQ(rows.size(), 4u * 11u * 2u + 1u);
+    for (const char* c : {"spinning_cube", "couette", "viscous_bunny", "stiff_arm"}) {
         EXPECT_TRUE(rows.count(std::string(c) + ",viscosity_method,weiler2018")) << c;
         const ganache::Image chart = ganache::readPng(out / (std::string(c) + ".png"));
         EXPECT_EQ(chart.width, 1200);
         EXPECT_EQ(chart.height, 800);
     }
     EXPECT_TRUE(rows.count("viscous_bunny,reference,reference"));
-    // The main solver keeps the cube's angular momentum to round-off (its error column is below 1e-9).
-    const std::string& cube = rows["spinning_cube,viscosity_method,weiler2018"];
-    const std::size_t errorColumn = 12;
-    std::size_t at = 0;
-    for (std::size_t k = 0; k < errorColumn; ++k) at = cube.find(',', at) + 1;
-    EXPECT_LT(std::stod(cube.substr(at)), 1e-9) << cube;
+    auto error = [&](const std::string& row) {  // the CSV's 13th column
+        const std::string& csvRow = rows[row];
+        std::size_t at = 0;
+        for (int k = 0; k < 12; ++k) at = csvRow.find(',', at) + 1;
+        return std::stod(csvRow.substr(at));
+    };
+    // The main solver keeps the cube's angular momentum to round-off.
+    EXPECT_LT(error("spinning_cube,viscosity_method,weiler2018"), 1e-9);
+    // Explicit viscosity would take billions of sub-steps on the stiff body: the case leaves it out and says so.
+    EXPECT_NE(rows["stiff_arm,viscosity_method,explicit"].find("not run: explicit viscosity"), std::string::npos);
+    // Only the stiff body's solves read stiff_tolerance, and stopping them at 1e-2 instead of 1e-3 lets the body
+    // deform 2.5 times as fast in the quick run (21 times in the full one).
+    EXPECT_GT(error("stiff_arm,stiff_tolerance,0.01"), 1.5 * error("stiff_arm,stiff_tolerance,0.001"));
+    EXPECT_EQ(error("viscous_bunny,stiff_tolerance,0.01"), error("viscous_bunny,stiff_tolerance,0.001"));
     std::ifstream md(out / "report.md");
     const std::string report((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
-    for (const char* s : {"## spinning_cube", "## couette", "## viscous_bunny", "Pareto front", "(halving the error costs",
+    for (const char* s : {"## spinning_cube", "## couette", "## viscous_bunny", "## stiff_arm", "Pareto front",
+                          "(halving the error costs",
                           "Quick mode"})
         EXPECT_NE(report.find(s), std::string::npos) << s;
 
