@@ -13,7 +13,9 @@ anchors also have "matched"), PIN (a CPU list for `taskset -c`: the timed runs o
 with THREADS=1 an unpinned run was at times 35 % slower on this project's 2-core machine, on every other launch in one
 series, which runs by turns can hand to one program). Runs are interleaved (SPlisHSPlasH, then each ganache variant, per
 repetition), so a change of machine load hits both. The reference for accuracy is ganache at tight tolerances and fixed 0.5 ms steps
-(run once per scene, not timed); errors are the relative differences of the spread and of the centroid height.
+(run once per scene, not timed); errors are the relative differences of the spread and of the centroid height. Time
+ratios are the medians' ratio and, beside it, the range of each repetition's ratio to SPlisHSPlasH's run of the same
+repetition.
 """
 import glob
 import json
@@ -143,10 +145,13 @@ def main():
         sph_loop = statistics.median(r["loop"] / r["sim"] for r in runs["SPlisHSPlasH"])
         for program, rs in runs.items():
             loop = statistics.median(r["loop"] / r["sim"] for r in rs)
+            # each repetition against SPlisHSPlasH's run of the same repetition, which ran just before it
+            paired = [(r["loop"] / r["sim"]) / (s["loop"] / s["sim"]) for r, s in zip(rs, runs["SPlisHSPlasH"])]
             last = rs[-1]
             shape = last["shape"]
             n = shape["n"]
             rows.append([scene, program, n, f"{loop:.2f}", f"{loop / sph_loop:.2f}",
+                         f"{min(paired):.2f}-{max(paired):.2f}",
                          f"{statistics.median(r['ms_step'] for r in rs):.1f}", last["steps"],
                          f"{1e6 * statistics.median(r['loop'] / r['steps'] for r in rs) * THREADS / n:.2f}",
                          f"{last['p_it']:.1f}", f"{last['v_it']:.1f}",
@@ -154,7 +159,8 @@ def main():
                          f"{100 * shape['compression_max']:.2f}", f"{100 * shape['bulk_density_error_median']:+.2f}",
                          f"{100 * abs(shape['spread_m'] / ref['spread_m'] - 1):.2f}",
                          f"{100 * abs(shape['centroid'][1] / ref['centroid'][1] - 1):.2f}"])
-    header = ["scene", "program", "fluid particles", "s per simulated s", "vs SPlisHSPlasH", "ms per step", "steps",
+    header = ["scene", "program", "fluid particles", "s per simulated s", "vs SPlisHSPlasH",
+              "vs SPlisHSPlasH, each repetition", "ms per step", "steps",
               "core-us per particle-step", "pressure it/step", "viscosity CG it/step",
               "compression mean / 99.9th percentile / max [%]", "bulk density error [%]", "spread error [%]",
               "centroid height error [%]"]
