@@ -312,8 +312,8 @@ std::vector<Case> cases() {
                true};
     Case stiff{"stiff_arm", "stiff_arm.yaml",
                "a stiff body with a thin arm resting on a slipping floor (exact: it keeps its shape)",
-               "RMS speed of the particles less the body's best-fitting rigid motion, in m/s (the exact answer "
-               "creeps at a few micrometres per second)",
+               "RMS speed of the particles less the body's best-fitting rigid motion, in m/s (the exact body creeps at "
+               "a few micrometres per second)",
                nullptr, deformationMetrics,
                [](const Metrics& m, const Metrics&) { return m.at("deformation_speed"); }};
     stiff.notRun["viscosity_method=explicit"] =
