@@ -170,6 +170,11 @@ struct Case {
     bool needsReference = false;
     /// Settings the case does not run, as "knob=setting", with the reason the report gives.
     std::map<std::string, std::string> notRun = {};
+    /// Why the case leaves out this setting of this knob; null where it runs it.
+    const std::string* skips(const std::string& knob, const std::string& setting) const {
+        const auto it = notRun.find(knob + "=" + setting);
+        return it == notRun.end() ? nullptr : &it->second;
+    }
 };
 
 Real angularMomentumKept(const ParticleSet& initial, const ParticleSet& end) {
@@ -577,20 +582,20 @@ void writeChart(const fs::path& dir, const Case& c, const std::vector<Knob>& kno
 
 void studyCommand(const StudyOptions& options) {
     if (options.threads < 0) throw InputError("--threads must be 0 (every core) or a positive number");
+    const std::vector<Case> known = cases();
+    std::vector<std::string> names, files;
+    for (const Case& c : known) names.push_back(c.name), files.push_back(c.file);
     if (!fs::is_directory(options.scenes))
         throw InputError(fmt::format("{}: the study's scenes are not there\n  fix: run from the repository root, or "
-                                     "pass --scenes DIR (the folder with spinning_cube.yaml, couette.yaml, "
-                                     "viscous_bunny.yaml, stiff_arm.yaml)",
-                                     options.scenes.string()));
+                                     "pass --scenes DIR (the folder with {})",
+                                     options.scenes.string(), fmt::join(files, ", ")));
     std::vector<Case> studied;
-    for (const Case& c : cases())
+    for (const Case& c : known)
         if (options.cases.empty() || std::count(options.cases.begin(), options.cases.end(), c.name))
             studied.push_back(c);
     for (const std::string& name : options.cases)
         if (std::none_of(studied.begin(), studied.end(), [&](const Case& c) { return c.name == name; }))
-            throw InputError(fmt::format("--case: no case '{}'\n  fix: one of spinning_cube, couette, viscous_bunny, "
-                                         "stiff_arm",
-                                         name));
+            throw InputError(fmt::format("--case: no case '{}'\n  fix: one of {}", name, fmt::join(names, ", ")));
     const int threads = options.threads > 0 ? options.threads : tbb::info::default_concurrency();
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
     prepareOutputFolder(options.out, "--out");
@@ -601,7 +606,7 @@ void studyCommand(const StudyOptions& options) {
         total += c.needsReference ? 1 : 0;
         for (const Knob& k : knobList) total += k.points.size();
         for (const Knob& k : knobList)
-            for (const Point& p : k.points) total -= c.notRun.count(k.name + "=" + p.label);
+            for (const Point& p : k.points) total -= c.skips(k.name, p.label) ? 1 : 0;
     }
     Runner runner(options.scenes, options.quick, options.stopSignal);
     std::vector<Run> runs;
@@ -637,10 +642,9 @@ void studyCommand(const StudyOptions& options) {
             for (const Knob& k : knobList)
                 for (const Point& p : k.points) {
                     Run r;
-                    const auto skip = c.notRun.find(k.name + "=" + p.label);
-                    if (skip != c.notRun.end()) {
+                    if (const std::string* why = c.skips(k.name, p.label)) {
                         r.caseName = c.name;
-                        r.notRun = skip->second;
+                        r.notRun = *why;
                     } else {
                         r = runner.run(c, p);
                         r.knob = k.name;
