@@ -195,16 +195,18 @@ TEST(PressureCoarseSpace, ALandingEndsNearTheConvergedOneInFewerProducts) {
                 plain.products, coarse.products, plain.centroid.y(), coarse.centroid.y(), converged.centroid.y(),
                 plain.meanCompression, coarse.meanCompression, converged.meanCompression);
     // An impact that keeps changing which particles hold pressure, the coarse space's hardest case (it saves 40 % on
-    // the 50k anchor block): 372 products against 424.
+    // the 50k anchor block): 333 products against 350.
     EXPECT_LT(coarse.products, plain.products);
-    // Both solves stop at a mean residual of 0.01 % of rest density, so each body may end away from the converged one
-    // by what that residual leaves: measured 0.02 mm without and 0.07 mm with the coarse space, on a 2.5 mm particle
-    // radius. 0.1 mm is 4 % of a radius; the expansions that stopped at the first particle's bound (before
-    // kProjectedStep) left both 0.33 mm lower. The mean compression after the particles move (what the linearised
-    // solve did not foresee: the converged landing's is 1.7e-4) exceeds the converged one's by at most the solve's
-    // tolerance, 1e-4: measured 0 and 0.3e-4.
-    EXPECT_LT((plain.centroid - converged.centroid).norm(), 1e-4);
-    EXPECT_LT((coarse.centroid - converged.centroid).norm(), 1e-4);
+    // Both solves stop at a mean residual of 0.01 % of rest density, and a body held to that ends a little lower than
+    // the converged one: 0.13 mm lower without and with the coarse space, on a 2.5 mm particle radius. How much lower
+    // scatters from tolerance to tolerance and does not shrink between 1e-4 and 2e-5: 0.03-0.30 mm over ten landings
+    // (five tolerances, with and without the coarse space), and 0.02-0.35 mm with MPRGP's own proportioning steps,
+    // whose 0.02 and 0.06 mm at 1e-4 were the low end of that scatter. 0.2 mm is 8 % of a radius; the expansions that
+    // stopped at the first particle's bound (before kProjectedStep) left both 0.33 mm lower. The mean compression
+    // after the particles move (what the linearised solve did not foresee: the converged landing's is 1.7e-4) exceeds
+    // the converged one's by at most the solve's tolerance, 1e-4: measured 0 and 0.4e-4.
+    EXPECT_LT((plain.centroid - converged.centroid).norm(), 2e-4);
+    EXPECT_LT((coarse.centroid - converged.centroid).norm(), 2e-4);
     EXPECT_LT(plain.meanCompression, converged.meanCompression + 1e-4);
     EXPECT_LT(coarse.meanCompression, converged.meanCompression + 1e-4);
 }
