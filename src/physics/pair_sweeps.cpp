@@ -354,14 +354,17 @@ void densityRate(std::size_t begin, std::size_t end, Pairs fluid, const Vec3* bo
         densityRateOf<false>(begin, end, fluid, boundarySum, bodyRate, x, u, rate);
 }
 
-void gradientSums(std::size_t begin, std::size_t end, Pairs fluid, const Row* x, Row* sums) {
-    const std::uint64_t* off = fluid.list->offsets.data();
-    const std::uint32_t* idx = fluid.list->indices.data();
+void pressureWeights(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x, const Real* gradient,
+                     const Real* mass, PairWeight* weights, Row* sums) {
+    const std::uint64_t* off = list.offsets.data();
+    const std::uint32_t* idx = list.indices.data();
     for (std::size_t i = begin; i < end; ++i) {
         const Lanes xi = load(x[i]);
         Lanes a = zero(), squares = zero();
         for (std::uint64_t p = off[i]; p < off[i + 1]; ++p) {
-            const Lanes g = broadcast(Real(fluid.weight[p])) * (xi - load(x[idx[p]]));
+            const std::uint32_t j = idx[p];
+            weights[p] = PairWeight(mass[j] * gradient[p]);
+            const Lanes g = broadcast(Real(weights[p])) * (xi - load(x[j]));
             a = a + g;
             squares = squares + g * g;
         }

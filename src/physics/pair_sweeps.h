@@ -85,9 +85,11 @@ struct ViscousWeightTerms {
 void viscousWeights(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x,
                     const ViscousWeightTerms& terms, PairWeight* weights, Mat3* blocks);
 
-/// For i in [begin, end): sums[i - begin] = (sum_p g_p, sum_p |g_p|^2) with g_p = w_p x_ij, a pressure pair's
-/// push (the DFSPH factor's sums), its first three entries the vector.
-void gradientSums(std::size_t begin, std::size_t end, Pairs fluid, const Row* x, Row* sums);
+/// For i in [begin, end): the pressure pairs' weights w_p = m_j g_p, stored in single precision (pair p at
+/// weights[p]), and sums[i - begin] = (sum_p g_p, sum_p |g_p|^2) with g_p = w_p x_ij, a pair's push (the DFSPH
+/// factor's sums), its first three entries the vector, in one pass over the pairs.
+void pressureWeights(std::size_t begin, std::size_t end, const NeighbourList& list, const Row* x, const Real* gradient,
+                     const Real* mass, PairWeight* weights, Row* sums);
 
 /// For i in [begin, end): rate_i = sum_p w_p (u_i - u_j) . x_ij + u_i . S_i - c_i, a density rate Drho/Dt with
 /// w_p = m_j g_p, S_i = sum_q wb_q x_ik the boundary's weights summed once a step and c_i = sum_q wb_q ub_k . x_ik the

@@ -141,27 +141,39 @@ TEST(PairSweeps, TakeTheSameSumsWhereTheyPrefetch) {
     EXPECT_EQ(wrong, 0u) << "particles whose sums differ from the definitions";
 }
 
-TEST(PairSweeps, TakeTheSquaredDistancesAndThePushSumsAsDefinedPairByPair) {
+TEST(PairSweeps, TakeTheSquaredDistancesAndThePressureWeightsAsDefinedPairByPair) {
     const Field f = field(40);
+    std::mt19937_64 rng(13);
+    std::uniform_real_distribution<Real> unit(-1, 1), positive(0.5, 2);
+    std::vector<Real> gradient, mass;
+    for (std::size_t p = 0; p < f.list.pairs(); ++p) gradient.push_back(unit(rng));
+    for (std::size_t i = 0; i < f.x.size(); ++i) mass.push_back(positive(rng));
     std::vector<Real> d2(f.list.pairs());
     sweeps::squaredDistances(0, f.x.size(), f.list, f.xRows.data(), d2.data());
+    sweeps::PairWeights weights(f.list.pairs());
     sweeps::Rows sums(f.x.size());
-    sweeps::gradientSums(0, f.x.size(), {&f.list, f.weight.data()}, f.xRows.data(), sums.data());
+    sweeps::pressureWeights(0, f.x.size(), f.list, f.xRows.data(), gradient.data(), mass.data(), weights.data(),
+                            sums.data());
     // a range that starts further on writes from its first pair (distances) and particle (sums) on
     std::vector<Real> d2Later(f.list.pairs() - f.list.first(13));
     sweeps::squaredDistances(13, f.x.size(), f.list, f.xRows.data(), d2Later.data());
+    sweeps::PairWeights weightsLater(f.list.pairs());
     sweeps::Rows sumsLater(f.x.size() - 13);
-    sweeps::gradientSums(13, f.x.size(), {&f.list, f.weight.data()}, f.xRows.data(), sumsLater.data());
+    sweeps::pressureWeights(13, f.x.size(), f.list, f.xRows.data(), gradient.data(), mass.data(), weightsLater.data(),
+                            sumsLater.data());
     for (std::size_t i = 0; i < f.x.size(); ++i) {
         Vec3 sum = Vec3::Zero();
         Real squares = 0;
         for (std::size_t p = f.list.first(i); p < f.list.last(i); ++p) {
-            const Vec3 d = f.x[i] - f.x[f.list.indices[p]];
+            const std::uint32_t j = f.list.indices[p];
+            const Vec3 d = f.x[i] - f.x[j];
             EXPECT_NEAR(d2[p], d.squaredNorm(), kTolerance) << "pair " << p;
+            EXPECT_EQ(weights[p], sweeps::PairWeight(mass[j] * gradient[p])) << "pair " << p;
             if (i >= 13) {
                 EXPECT_EQ(d2Later[p - f.list.first(13)], d2[p]) << "pair " << p;
+                EXPECT_EQ(weightsLater[p], weights[p]) << "pair " << p;
             }
-            const Vec3 g = Real(f.weight[p]) * d;
+            const Vec3 g = Real(weights[p]) * d;
             sum += g;
             squares += g.squaredNorm();
         }

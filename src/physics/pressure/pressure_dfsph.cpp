@@ -117,11 +117,10 @@ void PressureDFSPH::computeFactors(const StepContext& ctx, const ParticleSet& pa
     m_bodyRate.resize(n);
     m_gradientSum.resize(n);
     forEachBlock(n, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t p = f.first(begin); p < f.first(end); ++p)
-            m_weights[p] = sweeps::PairWeight(m[f.indices[p]] * ctx.gradients.fluid[p]);
         thread_local sweeps::Rows fluidSums;
         fluidSums.resize(end - begin);
-        sweeps::gradientSums(begin, end, {&f, m_weights.data()}, ctx.positionRows.data(), fluidSums.data());
+        sweeps::pressureWeights(begin, end, f, ctx.positionRows.data(), ctx.gradients.fluid.data(), m.data(),
+                                m_weights.data(), fluidSums.data());
         for (std::size_t i = begin; i < end; ++i) {
             Vec3 sum = fluidSums[i - begin].head<3>();
             const Real squares = fluidSums[i - begin][3];
