@@ -265,10 +265,10 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
     // functions subject to bound constraints with the rate of convergence and finite termination"): conjugate
     // gradient steps on the particles under pressure, a projected step when a step would make a pressure negative
     // (the gradient's, or the conjugate step's own where the bound stops it early: kProjectedStep), and proportioning
-    // steps that give pressure to particles their neighbours compress (here projected gradient steps over every
-    // particle: see the proportioning branch). The conjugate gradient steps are preconditioned by the DFSPH factor
-    // (1 / A_ii) plus, on bodies of many particles, the exact answer within the coarse space's cell-wise constant
-    // pressures, both on the particles under pressure. Every product with A costs what one Jacobi sweep does.
+    // steps that give pressure to particles their neighbours compress (in a fluid, projected gradient steps over
+    // every particle: see the proportioning branch). The conjugate gradient steps are preconditioned by the DFSPH
+    // factor (1 / A_ii) plus, on bodies of many particles, the exact answer within the coarse space's cell-wise
+    // constant pressures, both on the particles under pressure. Every product with A costs what one Jacobi sweep does.
     const std::size_t n = particles.size();
     const Real dt2 = ctx.dt * ctx.dt;
     const auto& rho0 = ctx.restDensity;
@@ -316,6 +316,11 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
         const Real room = pressure[i] > 0 ? std::min(pressure[i] / (kRelaxation * d), f) * f * d : Real(0);
         return Vec3(std::abs(f + c) / rho0[i], c * c * d, room);
     };
+    // Whether some particles move as one viscous body (see the proportioning below).
+    const std::vector<Real>* rigid = particles.find(attribute::kViscouslyRigid);
+    const bool bodies = rigid && deterministicSum<std::size_t>(n, [&](std::size_t i) {
+        return std::size_t((*rigid)[i] != 0);
+    }) > 0;
     // Particle i's change in a projected gradient step along the gradient g: the step Jacobi takes, kept >= 0.
     auto gradientStep = [&](std::size_t i, Real g) {
         return pressure[i] - std::max<Real>(pressure[i] - kRelaxation * inverseD(i) * g, 0);
@@ -396,16 +401,32 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
         // Proportional: the chopped gradient is small against what the free particles can still move.
         const Real g = gamma(error);
         if (measured[1] > g * g * measured[2]) {
-            // Proportioning: release the particles at zero pressure that their neighbours compress, by a projected
-            // gradient step over every particle (Jacobi's), which also moves the particles under pressure in the same
-            // product. MPRGP's own step moves only the released ones (along the chopped gradient, to the line's
-            // minimum) and leaves the rest to the conjugate steps after it, which a free surface's changing contacts
-            // then stop at the bound: the buckling anchor took 3.9 constant-density products a step that way, 3.2
-            // this way. The landing of PressureCoarseSpace.ALandingEndsNearTheConvergedOneInFewerProducts took 14-21 %
-            // fewer products at each tolerance from 1e-4 to 2e-5 (5-24 % with the coarse space) and ended as near the
-            // converged one (docs/benchmarks.md).
-            forEachParticle(n, [&](std::size_t i) { z[i] = gradientStep(i, free(i) + chopped(i)); });
-            measured = moveByZ();
+            // Proportioning: release the particles at zero pressure that their neighbours compress. In a fluid, by a
+            // projected gradient step over every particle (Jacobi's), which also moves the particles under pressure
+            // in the same product. MPRGP's own step moves only the released ones (along the chopped gradient, to the
+            // line's minimum) and leaves the rest to the conjugate steps after it, which a free surface's changing
+            // contacts then stop at the bound: the buckling anchor took 3.9 constant-density products a step that
+            // way, 3.2 this way, and the landing of PressureCoarseSpace.ALandingEndsNearTheConvergedOneInFewerProducts
+            // 14-21 % fewer at each tolerance from 1e-4 to 2e-5 (5-24 % with the coarse space), ending as near the
+            // converged one. Where particles move as one viscous body MPRGP's own step stays: the gradient steps
+            // leave a rougher pressure where the solve stops, which a stiff body shows as creep (the study's stiff_arm
+            // deformed at 0.53 mm/s against 0.30 at the default tolerances, 0.0057 against 0.0030 at stiff_tolerance
+            // 1e-5; docs/benchmarks.md).
+            if (!bodies) {
+                forEachParticle(n, [&](std::size_t i) { z[i] = gradientStep(i, free(i) + chopped(i)); });
+                measured = moveByZ();
+            } else {
+                forEachParticle(n, [&](std::size_t i) { z[i] = inverseD(i) * chopped(i); });
+                using Vec2 = Eigen::Matrix<Real, 2, 1>;
+                const Vec2 zq = multiplyAnd(z, Vec2(Vec2::Zero()), [&](std::size_t i) {
+                    return Vec2(z[i] * q[i], chopped(i) * z[i]);
+                }, std::plus<Vec2>());
+                if (!(zq[0] > 0)) break;
+                measured = deterministicSum<Vec3>(n, [&](std::size_t i) {
+                    moveOne(i, zq[1] / zq[0], z);
+                    return measure(i);
+                }, Vec3::Zero());
+            }
             restart = true;
             continue;
         }
