@@ -316,11 +316,18 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
         const Real room = pressure[i] > 0 ? std::min(pressure[i] / (kRelaxation * d), f) * f * d : Real(0);
         return Vec3(std::abs(f + c) / rho0[i], c * c * d, room);
     };
-    // Whether some particles move as one viscous body (see the proportioning below).
-    const std::vector<Real>* rigid = particles.find(attribute::kViscouslyRigid);
-    const bool bodies = rigid && deterministicSum<std::size_t>(n, [&](std::size_t i) {
-        return std::size_t((*rigid)[i] != 0);
-    }) > 0;
+    // Whether some particles move as one viscous body (see the proportioning below), counted at a solve's first
+    // proportioning rather than in every solve.
+    int bodies = -1;
+    auto anyBodies = [&] {
+        if (bodies < 0) {
+            const std::vector<Real>* rigid = particles.find(attribute::kViscouslyRigid);
+            bodies = rigid && deterministicSum<std::size_t>(n, [&](std::size_t i) {
+                return std::size_t((*rigid)[i] != 0);
+            }) > 0;
+        }
+        return bodies == 1;
+    };
     // Particle i's change in a projected gradient step along the gradient g: the step Jacobi takes, kept >= 0.
     auto gradientStep = [&](std::size_t i, Real g) {
         return pressure[i] - std::max<Real>(pressure[i] - kRelaxation * inverseD(i) * g, 0);
@@ -412,7 +419,7 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
             // leave a rougher pressure where the solve stops, which a stiff body shows as creep (the study's stiff_arm
             // deformed at 0.53 mm/s against 0.30 at the default tolerances, 0.0057 against 0.0030 at stiff_tolerance
             // 1e-5; docs/benchmarks.md).
-            if (!bodies) {
+            if (!anyBodies()) {
                 forEachParticle(n, [&](std::size_t i) { z[i] = gradientStep(i, free(i) + chopped(i)); });
                 measured = moveByZ();
             } else {
