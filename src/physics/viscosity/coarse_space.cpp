@@ -39,6 +39,10 @@ Mat6 identityPart(Real count, const Vec3& arms, const Mat3& second) {
     return e;
 }
 
+/// The power of two nearest to s > 0: the arms are offsets times its inverse, exact as a division by it would be, and
+/// the CG passes that take each particle's arm multiply instead of dividing.
+Real powerOfTwo(Real s) { return std::exp2(std::round(std::log2(s))); }
+
 Mat6 boundaryPart(const Vec3& a, const Mat3& extra) {
     Eigen::Matrix<Real, 3, 6> z;
     z << Mat3::Identity(), -cross(a);
@@ -72,7 +76,7 @@ std::array<std::uint64_t, 3> keyCell(std::int64_t key) {
 void RigidModes::build(const std::vector<Vec3>& x, const sweeps::BoundaryBlocks& boundary, Real minScale) {
     const std::size_t n = x.size();
     m_centre = deterministicSum<Vec3>(n, [&](std::size_t i) { return x[i]; }, Vec3::Zero()) / Real(n);
-    // The offsets from the centre and their second moments in one pass; the arms are those over m_scale.
+    // The offsets from the centre and their second moments in one pass; the arms are those times m_inverseScale.
     using Moments = Eigen::Matrix<Real, 3, 4>;
     const Moments moments = deterministicSum<Moments>(n, [&](std::size_t i) -> Moments {
         const Vec3 d = x[i] - m_centre;
@@ -81,9 +85,9 @@ void RigidModes::build(const std::vector<Vec3>& x, const sweeps::BoundaryBlocks&
         return m;
     }, Moments::Zero());
     const Mat3 offsetSquares = moments.leftCols<3>();
-    m_scale = std::max(std::sqrt(offsetSquares.trace() / Real(n)), minScale);
-    const Vec3 arms = moments.col(3) / m_scale;
-    const Mat3 second = offsetSquares / (m_scale * m_scale);
+    m_inverseScale = 1 / powerOfTwo(std::max(std::sqrt(offsetSquares.trace() / Real(n)), minScale));
+    const Vec3 arms = moments.col(3) * m_inverseScale;
+    const Mat3 second = offsetSquares * (m_inverseScale * m_inverseScale);
     // E = Z^T M Z = sum_i Z_i^T (I + extra_i) Z_i: the fluid's own coupling has the rigid motions in its null
     // space, so only the block-diagonal boundary part (when there is one) adds to the identity.
     Mat6 e = identityPart(Real(n), arms, second);
@@ -162,7 +166,7 @@ void BlockLdlt::factor(const std::vector<std::vector<std::pair<std::uint32_t, Ma
 
     // Row k of L from E's column k above the diagonal, A_ik (i < k): Z_i = A_ik - sum_j L_ij Z_j in the order of the
     // elimination tree, L_ki = Z_i^T D_i^-1, D_k = A_kk - sum_i L_ki Z_i.
-    m_columns.assign(m, {});
+    std::vector<std::vector<std::pair<std::uint32_t, Mat6>>> columns(m);
     m_inverseDiagonal.resize(m);
     std::vector<Mat6> z(m, Mat6::Zero());
     std::vector<std::uint32_t> tag(m, kRoot), pattern(m), path(m);
@@ -181,10 +185,10 @@ void BlockLdlt::factor(const std::vector<std::vector<std::pair<std::uint32_t, Ma
             const std::uint32_t i = pattern[t];
             const Mat6 zi = z[i];
             z[i].setZero();
-            for (const auto& [row, block] : m_columns[i]) z[row].noalias() -= block * zi;
+            for (const auto& [row, block] : columns[i]) z[row].noalias() -= block * zi;
             const Mat6 l = zi.transpose() * m_inverseDiagonal[i];
             d.noalias() -= l * zi;
-            m_columns[i].emplace_back(std::uint32_t(k), l);
+            columns[i].emplace_back(std::uint32_t(k), l);
         }
         // A pivot block of a cluster without rotations (one particle, or particles on a line) holds only the floor
         // there and may come out of round-off slightly indefinite: a pivoting LDL^T of the block keeps it usable.
@@ -193,6 +197,13 @@ void BlockLdlt::factor(const std::vector<std::vector<std::pair<std::uint32_t, Ma
             throw std::runtime_error("the viscosity coarse space could not be factored (a non-finite coefficient?); "
                                      "lower simulation.time_step.max");
     }
+    m_first.assign(1, 0);
+    m_row.clear();
+    m_block.clear();
+    for (const auto& column : columns) {
+        for (const auto& [row, block] : column) m_row.push_back(row), m_block.push_back(block);
+        m_first.push_back(std::uint32_t(m_row.size()));
+    }
     m_work.resize(m);
 }
 
@@ -200,10 +211,12 @@ void BlockLdlt::solve(Eigen::Matrix<Real, Eigen::Dynamic, 1>& b) const {
     const std::size_t m = m_order.size();
     for (std::size_t k = 0; k < m; ++k) m_work[k] = b.segment<6>(Eigen::Index(6 * m_order[k]));
     for (std::size_t k = 0; k < m; ++k)  // L y = b
-        for (const auto& [row, block] : m_columns[k]) m_work[row].noalias() -= block * m_work[k];
+        for (std::uint32_t e = m_first[k]; e < m_first[k + 1]; ++e)
+            m_work[m_row[e]].noalias() -= m_block[e] * m_work[k];
     for (std::size_t k = 0; k < m; ++k) m_work[k] = m_inverseDiagonal[k] * m_work[k];  // D
     for (std::size_t k = m; k-- > 0;)  // L^T x = y
-        for (const auto& [row, block] : m_columns[k]) m_work[k].noalias() -= block.transpose() * m_work[row];
+        for (std::uint32_t e = m_first[k]; e < m_first[k + 1]; ++e)
+            m_work[k].noalias() -= m_block[e].transpose() * m_work[m_row[e]];
     for (std::size_t k = 0; k < m; ++k) b.segment<6>(Eigen::Index(6 * m_order[k])) = m_work[k];
 }
 
@@ -281,7 +294,7 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
     tbb::parallel_sort(keyed.begin(), keyed.end());
     const std::size_t inside = std::size_t(
         std::lower_bound(keyed.begin(), keyed.end(), std::make_pair(kOutside, std::uint32_t(0))) - keyed.begin());
-    m_scale = cellSize;  // arms within +-1 keep E balanced between translations and rotations
+    m_inverseScale = 1 / powerOfTwo(cellSize);  // arms within about +-1: E balanced between translations and rotations
     m_of.assign(n, kNone);
     m_members.resize(inside);
     m_firstMember.clear();
@@ -352,23 +365,30 @@ void ClusterModes::build(const std::vector<Vec3>& x, const std::vector<std::uint
     m_rhs.resize(Eigen::Index(6 * clusters));
 }
 
-void ClusterModes::addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const {
-    if (clusters() == 0) return;
+Real ClusterModes::solveFor(const std::vector<Vec3>& x, const std::vector<Vec3>& r) const {
+    if (clusters() == 0) return 0;
+    const auto rhs = [&](std::size_t c) { return m_rhs.segment<6>(Eigen::Index(6 * c)); };
     forEachParticle(clusters(), [&](std::size_t c) {
-        Vec6 y = Vec6::Zero();
+        Vec3 total = Vec3::Zero(), moment = Vec3::Zero();
         for (std::uint32_t k = m_firstMember[c]; k < m_firstMember[c + 1]; ++k) {
             const std::uint32_t i = m_members[k];
-            y += rigidImage(arm(c, x[i]), r[i]);
+            total += r[i];
+            moment += arm(c, x[i]).cross(r[i]);
         }
-        m_rhs.segment<6>(Eigen::Index(6 * c)) = y;
+        rhs(c).head<3>() = total;
+        rhs(c).tail<3>() = moment;
     }, 64);
+    m_projection = m_rhs;
     m_factor.solve(m_rhs);
-    forEachParticle(x.size(), [&](std::size_t i) {
-        const std::size_t c = m_of[i];
-        if (c == kNone) return;
-        const Vec6 y = m_rhs.segment<6>(Eigen::Index(6 * c));
-        z[i] += y.head<3>() + y.tail<3>().cross(arm(c, x[i]));
+    // (Z^T r) . E^-1 Z^T r, summed over the clusters in a fixed order
+    return deterministicSum(clusters(), [&](std::size_t c) {
+        return m_projection.segment<6>(Eigen::Index(6 * c)).dot(rhs(c));
     });
+}
+
+void ClusterModes::addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const {
+    solveFor(x, r);
+    forEachParticle(x.size(), [&](std::size_t i) { z[i] += velocity(i, x[i]); });
 }
 
 }  // namespace ganache

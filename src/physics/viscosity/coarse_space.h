@@ -31,10 +31,10 @@ public:
     Vec3 velocity(const Vec6& y, const Vec3& xi) const { return y.head<3>() + y.tail<3>().cross(arm(xi)); }
 
 private:
-    Vec3 arm(const Vec3& xi) const { return (xi - m_centre) / m_scale; }  // scaled to keep Z^T M Z balanced
+    Vec3 arm(const Vec3& xi) const { return (xi - m_centre) * m_inverseScale; }  // scaled to keep Z^T M Z balanced
 
     Vec3 m_centre = Vec3::Zero();
-    Real m_scale = 1;
+    Real m_inverseScale = 1;  // a power of two
     Mat6 m_inverse = Mat6::Zero();
 };
 
@@ -52,8 +52,10 @@ public:
 private:
     std::vector<std::uint32_t> m_order;  // the block eliminated k-th
     std::vector<Mat6> m_inverseDiagonal;  // D_k^-1
-    // L's blocks below the diagonal, by column in elimination order: (row k, L_k,column), k ascending.
-    std::vector<std::vector<std::pair<std::uint32_t, Mat6>>> m_columns;
+    // L's blocks below the diagonal by column in elimination order, k ascending: column c's are the entries
+    // [m_first[c], m_first[c + 1]) of m_row (k) and m_block (L_kc).
+    std::vector<std::uint32_t> m_first, m_row;
+    std::vector<Mat6> m_block;
     mutable std::vector<Vec6> m_work;
 };
 
@@ -73,20 +75,30 @@ public:
     void build(const std::vector<Vec3>& x, const std::vector<std::uint8_t>* group, Real cellSize,
                std::size_t maxClusters, const NeighbourList& fluid, const sweeps::PairWeights& pairs, Real dt,
                const sweeps::BoundaryBlocks& boundary);
-    /// z += Z E^-1 Z^T r: the exact answer within the clusters' rigid motions.
+    /// Finds the clusters' rigid motions E^-1 Z^T r, the exact answer within them, and returns r . Z E^-1 Z^T r.
+    Real solveFor(const std::vector<Vec3>& x, const std::vector<Vec3>& r) const;
+    /// The velocity at particle i, at xi, of the motions solveFor() found last (zero outside the clusters).
+    Vec3 velocity(std::size_t i, const Vec3& xi) const {
+        const std::uint32_t c = m_of[i];
+        if (c == kNone) return Vec3::Zero();
+        const auto y = m_rhs.segment<6>(Eigen::Index(6 * c));
+        return y.head<3>() + y.tail<3>().cross(arm(c, xi));
+    }
+    /// z += Z E^-1 Z^T r.
     void addCorrection(const std::vector<Vec3>& x, const std::vector<Vec3>& r, std::vector<Vec3>& z) const;
     std::size_t clusters() const { return m_centre.size(); }
 
 private:
-    Vec3 arm(std::size_t c, const Vec3& xi) const { return (xi - m_centre[c]) / m_scale; }
+    Vec3 arm(std::size_t c, const Vec3& xi) const { return (xi - m_centre[c]) * m_inverseScale; }
 
-    Real m_scale = 1;
+    Real m_inverseScale = 1;  // a power of two
     static constexpr std::uint32_t kNone = ~std::uint32_t(0);
     std::vector<std::uint32_t> m_of;                      // each particle's cluster, or kNone
     std::vector<std::uint32_t> m_members, m_firstMember;  // the particles of cluster c, ascending
     std::vector<Vec3> m_centre;
     BlockLdlt m_factor;
-    mutable Eigen::Matrix<Real, Eigen::Dynamic, 1> m_rhs;
+    mutable Eigen::Matrix<Real, Eigen::Dynamic, 1> m_rhs;         // Z^T r, then the motions solveFor() found
+    mutable Eigen::Matrix<Real, Eigen::Dynamic, 1> m_projection;  // Z^T r, kept for r . Z E^-1 Z^T r
 };
 
 }  // namespace ganache

@@ -57,16 +57,6 @@ ViscosityWeiler2018::ViscosityWeiler2018(const ViscosityParams& params, const Si
                                          ParticleSet& particles)
     : ViscosityMethod(params, setup, particles), m_rigidFlag(&particles.add(attribute::kViscouslyRigid)) {}
 
-Real ViscosityWeiler2018::multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
-                                   std::vector<Vec3>& out) {
-    // (I - dt A) in, with the bodies' velocities on the right-hand side
-    m_inputRows.resize(particles.size());
-    forEachBlock(particles.size(), [&](std::size_t begin, std::size_t end) {
-        sweeps::toRows(begin, end, in.data(), m_inputRows.data());
-    });
-    return multiplyRows(ctx, particles, in, out);
-}
-
 Real ViscosityWeiler2018::multiplyRows(const StepContext& ctx, const ParticleSet& particles,
                                        const std::vector<Vec3>& in, std::vector<Vec3>& out) {
     return deterministicBlockSum(particles.size(), [&](std::size_t begin, std::size_t end) {
@@ -138,19 +128,13 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
                          pairs(), dt, boundaryBlocks());
         clusters = m_clusters.clusters() > 0;
     }
-    // z = P r: the block diagonal, plus (two-level) the exact answer within the rigid motions of its clusters or,
-    // without clusters, of the whole fluid, which the block diagonal of a stiff fluid barely moves (their
-    // eigenvalue is 1 against up to dt mu / (rho h^2) for the rest). Without clusters iterate() takes it apart.
-    const bool wholeFluid = m_params.preconditioner == P::Rigid || (m_params.preconditioner == P::Clusters && !clusters);
-    auto precondition = [&](const std::vector<Vec3>& r, std::vector<Vec3>& z) {
-        forEachParticle(n, [&](std::size_t i) { z[i] = m_inverseDiagonal[i] * r[i]; });
-        m_clusters.addCorrection(x, r, z);
-        return fieldDot(r, z);
-    };
-
-    const auto system = [&](const std::vector<Vec3>& in, std::vector<Vec3>& result) {
-        return multiply(ctx, particles, in, result);
-    };
+    // The preconditioner: the block diagonal, plus (two-level) the exact answer within the rigid motions of its
+    // clusters or, without clusters, of the whole fluid, which the block diagonal of a stiff fluid barely moves
+    // (their eigenvalue is 1 against up to dt mu / (rho h^2) for the rest).
+    const Coarse coarse = clusters ? Coarse::Clusters
+                          : m_params.preconditioner == P::Rigid || m_params.preconditioner == P::Clusters
+                              ? Coarse::WholeFluid
+                              : Coarse::None;
     // The correction the solve has to make, b - M v, and the warm start's residual b - M out, from one sweep. A loose
     // solve's warm start is, of the guesses v + a dv_last + c dv_earlier, the one nearest the solution in M's norm,
     // from the products of v and of both changes in that sweep (otherwise of v and apply()'s guess). The
@@ -189,10 +173,8 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     if (last) leastEnergyGuess(sums, v, m_start, *last, m_lastProduct, *earlier, m_earlierProduct, out, m_guess);
     const std::size_t maxIterations = std::size_t(m_params.maxIterations);
     ViscosityPass pass;
-    if (clusters)
-        pass = m_cg.solve(system, precondition, m_b, v, m_start, m_guess, out, tolerance, maxIterations);
-    else if (m_cg.start(m_b, v, m_start, m_guess, out, tolerance, maxIterations, pass))
-        pass = iterate(ctx, particles, wholeFluid, out, tolerance, maxIterations, pass);
+    if (m_cg.start(m_b, v, m_start, m_guess, out, tolerance, maxIterations, pass))
+        pass = iterate(ctx, particles, coarse, out, tolerance, maxIterations, pass);
     if (m_cg.scale == 0) return pass;  // v_df already solves the system
     // Whatever CG left, the rigid part of the residual is solved exactly: the fluid's viscous forces then
     // change its total momentum and angular momentum only through the boundary, as viscosity must. Left to
@@ -209,19 +191,21 @@ ViscosityPass ViscosityWeiler2018::solve(StepContext& ctx, const ParticleSet& pa
     return pass;
 }
 
-ViscosityPass ViscosityWeiler2018::iterate(const StepContext& ctx, const ParticleSet& particles, bool rigid,
+ViscosityPass ViscosityWeiler2018::iterate(const StepContext& ctx, const ParticleSet& particles, Coarse coarse,
                                            std::vector<Vec3>& out, Real tolerance, std::size_t maxIterations,
                                            ViscosityPass pass) {
     // z = D^-1 r + Z c with c = (Z^T M Z)^-1 Z^T r, so r . z = r . D^-1 r + (Z^T r) . c: the pass that updates r also
-    // takes r . D^-1 r and Z^T r, and z is needed only in the pass that makes the next direction p, which also writes
-    // p's rows for the next product. Two vector passes an iteration where the generic CG takes five (the copy to rows,
-    // the update, the projection, z and p): each costs a few microseconds on 2 threads even at buckling's 2,618
+    // takes r . D^-1 r (and, for the whole fluid's motions, Z^T r; the clusters gather theirs over their members), and
+    // z is needed only in the pass that makes the next direction p, which also writes p's rows for the next product.
+    // Two vector passes an iteration where the generic CG takes five or more (the copy to rows, the update, z, the
+    // clusters' share of z, r . z and p): each costs a few microseconds on 2 threads even at buckling's 2,618
     // particles, and at a million each streams the particles' vectors once more.
     const std::size_t n = particles.size();
     const auto& x = particles.x();
     auto& r = m_cg.r;
     auto& p = m_cg.p;
     auto& q = m_cg.q;
+    const bool rigid = coarse == Coarse::WholeFluid;
     // |r|^2, r . D^-1 r and Z^T r over a block, after moving it by alpha along p and q (none at first), kept in
     // registers as RigidModes::project keeps its sums.
     using Vec8 = Eigen::Matrix<Real, 8, 1>;
@@ -244,10 +228,11 @@ ViscosityPass ViscosityWeiler2018::iterate(const StepContext& ctx, const Particl
             return s;
         }, Vec8::Zero());
     };
-    Vec6 coarse = Vec6::Zero();
+    Vec6 motion = Vec6::Zero();  // the whole fluid's
     auto rz = [&](const Vec8& sums) {
-        if (rigid) coarse = m_rigid.solve(sums.tail<6>());
-        return sums[1] + sums.tail<6>().dot(coarse);
+        if (coarse == Coarse::Clusters) return sums[1] + m_clusters.solveFor(x, r);
+        if (rigid) motion = m_rigid.solve(sums.tail<6>());
+        return sums[1] + sums.tail<6>().dot(motion);
     };
     // p = z + beta p (p = z at first), and its rows.
     m_inputRows.resize(n);
@@ -255,7 +240,8 @@ ViscosityPass ViscosityWeiler2018::iterate(const StepContext& ctx, const Particl
         forEachBlock(n, [&](std::size_t begin, std::size_t end) {
             for (std::size_t i = begin; i < end; ++i) {
                 Vec3 z = m_inverseDiagonal[i] * r[i];
-                if (rigid) z += m_rigid.velocity(coarse, x[i]);
+                if (rigid) z += m_rigid.velocity(motion, x[i]);
+                if (coarse == Coarse::Clusters) z += m_clusters.velocity(i, x[i]);
                 p[i] = first ? z : Vec3(z + beta * p[i]);
             }
             sweeps::toRows(begin, end, p.data(), m_inputRows.data());

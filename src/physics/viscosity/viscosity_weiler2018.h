@@ -26,15 +26,14 @@ protected:
     ViscosityPass solve(StepContext& ctx, const ParticleSet& particles, std::vector<Vec3>& out) override;
 
 private:
-    /// out = (I - dt A) in; returns in . out.
-    Real multiply(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
-                  std::vector<Vec3>& out);
-    /// The same with in's rows already in m_inputRows.
+    /// out = (I - dt A) in, in's rows already in m_inputRows; returns in . out.
     Real multiplyRows(const StepContext& ctx, const ParticleSet& particles, const std::vector<Vec3>& in,
                       std::vector<Vec3>& out);
-    /// CG's iterations from m_cg.start() on, preconditioned by the block diagonal and, with `rigid`, the whole fluid's
-    /// rigid motions, in two vector passes an iteration (see the definition).
-    ViscosityPass iterate(const StepContext& ctx, const ParticleSet& particles, bool rigid, std::vector<Vec3>& out,
+    /// The rigid motions the preconditioner solves for exactly, besides the block diagonal.
+    enum class Coarse { None, WholeFluid, Clusters };
+    /// CG's iterations from m_cg.start() on, preconditioned by the block diagonal and the rigid motions of `coarse`,
+    /// in two vector passes an iteration (see the definition).
+    ViscosityPass iterate(const StepContext& ctx, const ParticleSet& particles, Coarse coarse, std::vector<Vec3>& out,
                           Real tolerance, std::size_t maxIterations, ViscosityPass pass);
     sweeps::BoundaryBlocks boundaryBlocks() const {
         return {m_nearBoundary.data(), m_nearBlocks.data(), m_nearBlocks.size()};
