@@ -4,7 +4,8 @@
 // Reported per step: neighbours (search, densities, DFSPH factors), pressure (both DFSPH solves), viscosity,
 // CG iterations per solve, constant-density and divergence-free iterations per step, total; and resident memory per
 // particle. A heat variant gives the heat effect's share, a block-Jacobi variant the saving of the coarse space (at
-// this viscosity no particle is stiff enough for the clusters, so the default uses the fluid-wide rigid motions).
+// this viscosity no particle is stiff enough for the clusters, so the default uses the fluid-wide rigid motions), and
+// `stiffStep` the same blob at 1e6 Pa s, whose solves take the clusters' rigid motions and the stiff tolerance.
 // Run: build/benchmarks/step_bench --benchmark_counters_tabular=true
 
 #include "physics/simulation.h"
@@ -34,30 +35,29 @@ std::size_t residentBytes() {
 
 // A cube of `side` particles per axis (r = 5 mm) just above a floor, moving down at 1 m/s; with `heat`, also
 // conduction, radiation and a lamp above it (the heat effect's share of a step).
-Scene blobScene(int side, bool heat, const char* preconditioner) {
+Scene blobScene(int side, bool heat, const char* preconditioner, Real mu) {
     const Real r = 0.005, edge = side * 2 * r;
     const auto dir = std::filesystem::temp_directory_path() / "ganache_bench";
     std::filesystem::create_directories(dir);
-    const auto file = dir / fmt::format("blob{}{}_{}.yaml", side, heat ? "_heat" : "", preconditioner);
+    const auto file = dir / fmt::format("blob{}{}_{}_{}.yaml", side, heat ? "_heat" : "", preconditioner, mu);
     std::ofstream(file) << fmt::format(R"(ganache: 1
 particles: {{radius: {r}, max_count: 100000000}}
 domain: {{min: [-1, -0.1, -1], max: [1, 2, 1]}}
 simulation: {{time_step: {{fixed: 0.0005}}}}
 fluids: [{{material: honey, velocity: [0, -1, 0], box: {{min: [{lo}, 0.011, {lo}], max: [{hi}, {top}, {hi}]}}}}]
 boundaries: [{{name: floor, plane: {{point: [0, 0, 0], normal: [0, 1, 0]}}}}]
-effects: {{gravity: {{}}, viscosity: {{mu: 1.0e4, preconditioner: {preconditioner}}}{heat}}}
+effects: {{gravity: {{}}, viscosity: {{mu: {mu}, preconditioner: {preconditioner}}}{heat}}}
 )",
                                        fmt::arg("heat", heat ? ", heat: {radiation_time: 10, sources: [{sphere: {centre: "
                                                                "[0, 0.5, 0]}, intensity: 1.0e4, radius: 0.1}]}"
                                                              : ""),
-                                       fmt::arg("preconditioner", preconditioner), fmt::arg("r", r), fmt::arg("lo", -edge / 2), fmt::arg("hi", edge / 2),
-                                       fmt::arg("top", 0.011 + edge));
+                                       fmt::arg("preconditioner", preconditioner), fmt::arg("mu", mu), fmt::arg("r", r),
+                                       fmt::arg("lo", -edge / 2), fmt::arg("hi", edge / 2), fmt::arg("top", 0.011 + edge));
     return loadScene(file, Quality::parse("final"));
 }
 
-void step(benchmark::State& state) {
-    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(1)));
-    const Scene scene = blobScene(int(state.range(0)), state.range(2) != 0, state.range(3) ? "block_jacobi" : "clusters");
+// Ten steps of the blob (after ten to its landing), reported by part.
+void measureSteps(benchmark::State& state, const Scene& scene) {
     const std::size_t resident = residentBytes();
     Sample sample = sampleScene(scene);
     Simulation sim(simulationSetup(scene), std::move(sample.fluid), sample.boundaries);
@@ -97,6 +97,19 @@ void step(benchmark::State& state) {
     state.counters["bytes_per_particle"] = double(residentBytes() - resident) / double(sim.particles().size());
 }
 
+void step(benchmark::State& state) {
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(1)));
+    measureSteps(state, blobScene(int(state.range(0)), state.range(2) != 0,
+                                  state.range(3) ? "block_jacobi" : "clusters", 1e4));
+}
+
+// The same blob of a chocolate as stiff as 1e6 Pa s, where the viscosity's preconditioner takes clusters' rigid
+// motions (dt A against the identity above the threshold at every particle) and its solves the stiff tolerance.
+void stiffStep(benchmark::State& state) {
+    tbb::global_control threads(tbb::global_control::max_allowed_parallelism, std::size_t(state.range(1)));
+    measureSteps(state, blobScene(int(state.range(0)), false, "clusters", 1e6));
+}
+
 }  // namespace
 
 // 38^3 = 54,872 particles (the paper's 56k bunny), 58^3 = 195,112 (its 200k), 100^3 = 1,000,000 (its statue's 1.1M).
@@ -108,5 +121,7 @@ BENCHMARK(step)->ArgsProduct({{38, 58}, {1, 2}, {0}, {0}})->Unit(benchmark::kMil
 BENCHMARK(step)->Args({100, 2, 0, 0})->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(10);
 BENCHMARK(step)->ArgsProduct({{38}, {1, 2}, {1}, {0}})->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(10);
 BENCHMARK(step)->ArgsProduct({{38}, {2}, {0}, {1}})->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(10);
+// Arguments: side, threads.
+BENCHMARK(stiffStep)->ArgsProduct({{38, 58}, {2}})->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(10);
 
 BENCHMARK_MAIN();
