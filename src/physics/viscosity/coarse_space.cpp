@@ -24,7 +24,7 @@ namespace {
 
 /// c -= a b, each entry's six products taken in order by fused multiply-adds. The factorisation spends its time here:
 /// with AVX2 a column of c is a vector and a half, and the product takes a third of the time Eigen's took (13 against
-/// 35 ns); the loops without it round alike, so both builds give the same bytes.
+/// 35 ns); the loops for targets without it round alike.
 inline void subtractProduct(const Mat6& a, const Mat6& b, Mat6& c) {
 #if defined(__AVX2__) && defined(__FMA__)
     __m256d top[6];
