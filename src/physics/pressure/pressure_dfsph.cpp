@@ -417,8 +417,8 @@ std::size_t PressureDFSPH::solveMprgp(Solve which, StepContext& ctx, ParticleSet
             // 14-21 % fewer at each tolerance from 1e-4 to 2e-5 (5-24 % with the coarse space), ending as near the
             // converged one. Where particles move as one viscous body MPRGP's own step stays: the gradient steps
             // leave a rougher pressure where the solve stops, which a stiff body shows as creep (the study's stiff_arm
-            // deformed at 0.53 mm/s against 0.30 at the default tolerances, 0.0057 against 0.0030 at stiff_tolerance
-            // 1e-5; docs/benchmarks.md).
+            // deformed at 0.076 / 0.0057 mm/s against 0.062 / 0.0030 at stiff_tolerance 1e-4 / 1e-5, where its figure
+            // does not move with round-off as it does at the default tolerances; docs/benchmarks.md).
             if (!anyBodies()) {
                 forEachParticle(n, [&](std::size_t i) { z[i] = gradientStep(i, free(i) + chopped(i)); });
                 measured = moveByZ();
