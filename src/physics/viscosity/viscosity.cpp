@@ -56,10 +56,28 @@ Real fieldDot(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
 ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
                                        const std::vector<Vec3>& v, std::vector<Vec3>& x, Real tolerance,
                                        std::size_t maxIterations) {
-    std::vector<Vec3> mv(b.size()), mx(b.size());
+    const std::size_t n = b.size();
+    std::vector<Vec3> mv(n), mx(n);
     multiply(v, mv);
     multiply(x, mx);
-    return solve(multiply, precondition, b, v, mv, mx, x, tolerance, maxIterations);
+    ViscosityPass pass;
+    if (!start(b, v, mv, mx, x, tolerance, maxIterations, pass)) return pass;
+    Real rz = precondition(r, z);
+    std::copy(z.begin(), z.end(), p.begin());
+    for (;;) {
+        const Real alpha = rz / multiply(p, q);
+        const Real rrNext = deterministicSum(n, [&](std::size_t i) {
+            x[i] += alpha * p[i];
+            r[i] -= alpha * q[i];
+            return r[i].squaredNorm();
+        });
+        pass.residual = std::sqrt(rrNext) / scale;
+        if (++pass.iterations >= maxIterations || pass.residual <= tolerance) return pass;
+        const Real rzNext = precondition(r, z);
+        const Real beta = rzNext / rz;
+        rz = rzNext;
+        forEachParticle(n, [&](std::size_t i) { p[i] = z[i] + beta * p[i]; });
+    }
 }
 
 bool ConjugateGradient::start(const std::vector<Vec3>& b, const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
@@ -81,31 +99,6 @@ bool ConjugateGradient::start(const std::vector<Vec3>& b, const std::vector<Vec3
     }
     pass.residual = std::sqrt(squares[1]) / scale;
     return pass.residual > tolerance && maxIterations > 0;
-}
-
-ViscosityPass ConjugateGradient::solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
-                                       const std::vector<Vec3>& v, const std::vector<Vec3>& mv,
-                                       const std::vector<Vec3>& mx, std::vector<Vec3>& x, Real tolerance,
-                                       std::size_t maxIterations) {
-    const std::size_t n = b.size();
-    ViscosityPass pass;
-    if (!start(b, v, mv, mx, x, tolerance, maxIterations, pass)) return pass;
-    Real rz = precondition(r, z);
-    std::copy(z.begin(), z.end(), p.begin());
-    for (;;) {
-        const Real alpha = rz / multiply(p, q);
-        const Real rrNext = deterministicSum(n, [&](std::size_t i) {
-            x[i] += alpha * p[i];
-            r[i] -= alpha * q[i];
-            return r[i].squaredNorm();
-        });
-        pass.residual = std::sqrt(rrNext) / scale;
-        if (++pass.iterations >= maxIterations || pass.residual <= tolerance) return pass;
-        const Real rzNext = precondition(r, z);
-        const Real beta = rzNext / rz;
-        rz = rzNext;
-        forEachParticle(n, [&](std::size_t i) { p[i] = z[i] + beta * p[i]; });
-    }
 }
 
 void leastEnergyGuess(const std::vector<Vec3>& b, const std::vector<Vec3>& v, const std::vector<Vec3>& mv,

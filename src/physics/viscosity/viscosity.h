@@ -131,10 +131,6 @@ struct ConjugateGradient {
     /// system (scale 0) x becomes v. On return `r` holds the residual b - M x.
     ViscosityPass solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
                         const std::vector<Vec3>& v, std::vector<Vec3>& x, Real tolerance, std::size_t maxIterations);
-    /// The same with the products M v (mv) and M x (mx) of the initial guess given.
-    ViscosityPass solve(const Apply& multiply, const Apply& precondition, const std::vector<Vec3>& b,
-                        const std::vector<Vec3>& v, const std::vector<Vec3>& mv, const std::vector<Vec3>& mx,
-                        std::vector<Vec3>& x, Real tolerance, std::size_t maxIterations);
     /// What solve() does before its iterations: sizes the vectors, sets `scale`, r = b - M x and `pass`; false where
     /// no iteration is needed (x = v where scale is 0). For solvers that run their own iterations on these vectors.
     bool start(const std::vector<Vec3>& b, const std::vector<Vec3>& v, const std::vector<Vec3>& mv,

@@ -197,9 +197,9 @@ ViscosityPass ViscosityWeiler2018::iterate(const StepContext& ctx, const Particl
     // z = D^-1 r + Z c with c = (Z^T M Z)^-1 Z^T r, so r . z = r . D^-1 r + (Z^T r) . c: the pass that updates r also
     // takes r . D^-1 r (and, for the whole fluid's motions, Z^T r; the clusters gather theirs over their members), and
     // z is needed only in the pass that makes the next direction p, which also writes p's rows for the next product.
-    // Two vector passes an iteration where the generic CG takes five or more (the copy to rows, the update, z, the
-    // clusters' share of z, r . z and p): each costs a few microseconds on 2 threads even at buckling's 2,618
-    // particles, and at a million each streams the particles' vectors once more.
+    // Two vector passes an iteration (three with the clusters' gather) where the generic CG takes five or more (the
+    // copy to rows, the update, z, the clusters' share of z, r . z and p): each costs a few microseconds on 2 threads
+    // even at buckling's 2,618 particles, and at a million each streams the particles' vectors once more.
     const std::size_t n = particles.size();
     const auto& x = particles.x();
     auto& r = m_cg.r;

@@ -32,7 +32,7 @@ private:
     /// The rigid motions the preconditioner solves for exactly, besides the block diagonal.
     enum class Coarse { None, WholeFluid, Clusters };
     /// CG's iterations from m_cg.start() on, preconditioned by the block diagonal and the rigid motions of `coarse`,
-    /// in two vector passes an iteration (see the definition).
+    /// in two vector passes an iteration, three with clusters (see the definition).
     ViscosityPass iterate(const StepContext& ctx, const ParticleSet& particles, Coarse coarse, std::vector<Vec3>& out,
                           Real tolerance, std::size_t maxIterations, ViscosityPass pass);
     sweeps::BoundaryBlocks boundaryBlocks() const {
