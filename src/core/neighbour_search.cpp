@@ -223,7 +223,7 @@ void sortByKey(std::vector<std::pair<std::uint64_t, std::uint32_t>>& items,
 UniformGrid::UniformGrid(Real cellSize, std::size_t slabPoints) : m_cellSize(cellSize), m_slabPoints(slabPoints) {
     if (!(cellSize > 0) || !std::isfinite(cellSize))
         throw std::invalid_argument("UniformGrid: cell size must be positive and finite");
-    if (slabPoints > std::size_t(1) << 40) throw std::invalid_argument("UniformGrid: slabPoints above 2^40");
+    if (slabPoints > kAlwaysRowOrder) throw std::invalid_argument("UniformGrid: slabPoints above 2^40");
 }
 
 void UniformGrid::build(const std::vector<Vec3>& x) {

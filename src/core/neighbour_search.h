@@ -61,9 +61,11 @@ public:
 
     /// slabPoints with which a grid keeps Z order for any point set.
     static constexpr std::size_t kAlwaysZOrder = 0;
+    /// slabPoints with which a grid takes row order for any point set it can hold.
+    static constexpr std::size_t kAlwaysRowOrder = std::size_t(1) << 40;
 
-    /// slabPoints: kSlabPoints, kAlwaysZOrder (for consumers that walk space in blocks, as OpenVDB's trees do), or
-    /// another bound for row order (at most 2^40).
+    /// slabPoints: kSlabPoints, kAlwaysZOrder (for consumers that walk space in blocks, as OpenVDB's trees do),
+    /// kAlwaysRowOrder, or another bound for row order (at most 2^40).
     explicit UniformGrid(Real cellSize, std::size_t slabPoints = kSlabPoints);
 
     /// Sorts the points into cells. Throws std::runtime_error for a non-finite point or one outside the
@@ -75,6 +77,7 @@ public:
     void releaseWorkingMemory();
 
     Real cellSize() const { return m_cellSize; }
+    std::size_t slabPoints() const { return m_slabPoints; }
     std::size_t pointCount() const { return m_sorted.size(); }
     std::size_t cellCount() const { return m_cellKeys.size(); }
 

@@ -36,7 +36,9 @@ void PressureCoarseSpace::build(const std::vector<Vec3>& x, const std::vector<Re
     // Cells grow until there are at most maxCells: the simplicial factorisation's cost grows about as the square of
     // the cells in three dimensions.
     for (;;) {
-        if (m_grid.cellSize() != cellSize) m_grid = UniformGrid(cellSize);
+        // A restored grid was built in a fixed order (see restore): from here on the order is the particles' choice.
+        if (m_grid.cellSize() != cellSize || m_grid.slabPoints() != UniformGrid::kSlabPoints)
+            m_grid = UniformGrid(cellSize);
         m_grid.build(x);
         if (m_grid.cellCount() <= maxCells) break;
         cellSize *= std::max(1.1, std::cbrt(Real(m_grid.cellCount()) / Real(maxCells)));
@@ -184,7 +186,9 @@ void PressureCoarseSpace::restore(ByteReader& in) {
         clear();
         return;
     }
-    // The grid from the cells' centres: the same cells, so the same order. Checked before anything is replaced.
+    // The grid from the cells' centres: the same cells. The build's grid took Z order or row order by how many
+    // particles it held (UniformGrid::kSlabPoints), which the cells alone do not say, so the one of the two orders
+    // that lists them as saved is it. Checked before anything is replaced.
     std::vector<Vec3> centres(cells);
     for (std::size_t c = 0; c < cells; ++c)
         for (int a = 0; a < 3; ++a) {
@@ -192,12 +196,21 @@ void PressureCoarseSpace::restore(ByteReader& in) {
                 throw std::runtime_error("its pressure coarse space has a cell out of range");
             centres[c][a] = (Real(coords[3 * c + std::size_t(a)]) + Real(0.5)) * cellSize;
         }
-    UniformGrid grid(cellSize);
+    auto listsAsSaved = [&](const UniformGrid& grid) {
+        if (grid.cellCount() != cells) throw std::runtime_error("its pressure coarse space repeats a cell");
+        for (std::size_t c = 0; c < cells; ++c)
+            if (!std::equal(grid.cellCoords(c).begin(), grid.cellCoords(c).end(),
+                            coords.begin() + std::ptrdiff_t(3 * c)))
+                return false;
+        return true;
+    };
+    UniformGrid grid(cellSize, UniformGrid::kAlwaysRowOrder);
     grid.build(centres);
-    if (grid.cellCount() != cells) throw std::runtime_error("its pressure coarse space repeats a cell");
-    for (std::size_t c = 0; c < cells; ++c)
-        if (!std::equal(grid.cellCoords(c).begin(), grid.cellCoords(c).end(), coords.begin() + std::ptrdiff_t(3 * c)))
-            throw std::runtime_error("its pressure coarse space's cells are out of order");
+    if (!listsAsSaved(grid)) {
+        grid = UniformGrid(cellSize, UniformGrid::kAlwaysZOrder);
+        grid.build(centres);
+        if (!listsAsSaved(grid)) throw std::runtime_error("its pressure coarse space's cells are out of order");
+    }
     clear();
     m_grid = std::move(grid);
     m_rows.resize(cells);
