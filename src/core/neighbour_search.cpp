@@ -134,6 +134,31 @@ void CellRuns::find(const UniformGrid& grid, const std::array<std::int32_t, 3>& 
     if (!grid.mayHoldAround(cell)) return;  // a fluid cell far from every wall: no lookups
     const int f = grid.fastAxis();
     const int outer = f == 2 ? 1 : 2, inner = f == 0 ? 1 : 0;  // of the other two axes, z before y before x
+    // Appends cell `found` (-1: none) to the runs; `last` the cell found before it along the fast axis.
+    const auto add = [&](std::int64_t found, std::int64_t& last) {
+        if (found < 0) return;
+        if (found == last + 1) {
+            to[count - 1] = grid.cellBegin(std::size_t(found) + 1);
+        } else {
+            from[count] = grid.cellBegin(std::size_t(found));
+            to[count] = grid.cellBegin(std::size_t(found) + 1);
+            ++count;
+        }
+        last = found;
+    };
+    if (grid.dense()) {  // the table's margin holds every cell around this one: one load a cell, no tests
+        const std::uint32_t* table = grid.denseCells();
+        const std::size_t at = grid.denseSlot(cell[0], cell[1], cell[2]);
+        std::ptrdiff_t step[3];
+        for (int a = 0; a < 3; ++a) step[a] = std::ptrdiff_t(grid.denseStride(a));
+        for (int d0 = -1; d0 <= 1; ++d0)
+            for (int d1 = -1; d1 <= 1; ++d1) {
+                const std::uint32_t* row = table + at + d0 * step[outer] + d1 * step[inner];
+                std::int64_t last = -2;
+                for (int d2 = -1; d2 <= 1; ++d2) add(std::int64_t(row[d2 * step[f]]) - 1, last);
+            }
+        return;
+    }
     std::int64_t c[3];
     for (int d0 = -1; d0 <= 1; ++d0)
         for (int d1 = -1; d1 <= 1; ++d1) {
@@ -142,16 +167,7 @@ void CellRuns::find(const UniformGrid& grid, const std::array<std::int32_t, 3>& 
                 c[outer] = cell[std::size_t(outer)] + d0;
                 c[inner] = cell[std::size_t(inner)] + d1;
                 c[f] = cell[std::size_t(f)] + d2;
-                const std::int64_t found = grid.findCell(c[0], c[1], c[2]);
-                if (found < 0) continue;
-                if (found == last + 1) {
-                    to[count - 1] = grid.cellBegin(std::size_t(found) + 1);
-                } else {
-                    from[count] = grid.cellBegin(std::size_t(found));
-                    to[count] = grid.cellBegin(std::size_t(found) + 1);
-                    ++count;
-                }
-                last = found;
+                add(grid.findCell(c[0], c[1], c[2]), last);
             }
         }
 }
@@ -300,7 +316,9 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     }
 
     // Where the occupied cells fill a good part of their bounding box (a body of fluid, a tank's walls), a dense
-    // table finds a cell with one load instead of a hashed probe; its size is capped at a few words per cell.
+    // table finds a cell with one load instead of a hashed probe; its size is capped at a few words per cell. It
+    // reaches kDenseMargin cells past the box, so that the cells around any cell that mayHoldAround() lie in it and
+    // CellRuns::find reads them without a test of bounds.
     m_denseCells.clear();
     if (m_cellCoords.empty()) return;
     auto& lo = m_cellMin;
@@ -315,13 +333,14 @@ void UniformGrid::build(const std::vector<Vec3>& x) {
     std::uint64_t volume = 1;
     for (int a = 0; a < 3; ++a) volume *= std::uint64_t(hi[a] - lo[a] + 1);
     if (volume > 16 * m_cellCoords.size() + 4096) return;
-    m_denseMin = lo;
-    for (int a = 0; a < 3; ++a) m_denseSize[a] = hi[a] - lo[a] + 1;
-    m_denseCells.assign(volume, 0);
+    for (int a = 0; a < 3; ++a) {
+        m_denseMin[a] = lo[a] - kDenseMargin;
+        m_denseSize[a] = hi[a] - lo[a] + 1 + 2 * kDenseMargin;
+    }
+    m_denseCells.assign(std::size_t(m_denseSize[0] * m_denseSize[1] * m_denseSize[2]), 0);
     for (std::size_t c = 0; c < m_cellCoords.size(); ++c) {
         const auto& cc = m_cellCoords[c];
-        m_denseCells[std::size_t(((cc[2] - lo[2]) * m_denseSize[1] + (cc[1] - lo[1])) * m_denseSize[0] +
-                                 (cc[0] - lo[0]))] = std::uint32_t(c + 1);
+        m_denseCells[denseSlot(cc[0], cc[1], cc[2])] = std::uint32_t(c + 1);
     }
 }
 
@@ -366,7 +385,7 @@ std::int64_t UniformGrid::findCell(std::int64_t cx, std::int64_t cy, std::int64_
         const std::int64_t ix = cx - m_denseMin[0], iy = cy - m_denseMin[1], iz = cz - m_denseMin[2];
         if (ix < 0 || iy < 0 || iz < 0 || ix >= m_denseSize[0] || iy >= m_denseSize[1] || iz >= m_denseSize[2])
             return -1;
-        return std::int64_t(m_denseCells[std::size_t((iz * m_denseSize[1] + iy) * m_denseSize[0] + ix)]) - 1;
+        return std::int64_t(m_denseCells[denseSlot(cx, cy, cz)]) - 1;
     }
     if (m_rowOrder) {
         const std::int64_t c[3] = {cx, cy, cz};

@@ -99,6 +99,17 @@ public:
     /// Whether cells are found through a dense table over the occupied cells' bounding box (compact point sets)
     /// rather than through the hash (sparse ones).
     bool dense() const { return !m_denseCells.empty(); }
+    /// The dense table: cell index + 1 (0: empty) at denseSlot(); valid where dense().
+    const std::uint32_t* denseCells() const { return m_denseCells.data(); }
+    /// Where a cell lies in the dense table: any cell within kDenseMargin of the occupied cells' bounding box.
+    std::size_t denseSlot(std::int64_t cx, std::int64_t cy, std::int64_t cz) const {
+        return std::size_t(((cz - m_denseMin[2]) * m_denseSize[1] + (cy - m_denseMin[1])) * m_denseSize[0] +
+                           (cx - m_denseMin[0]));
+    }
+    /// How far apart in the dense table two cells one apart along `axis` lie.
+    std::size_t denseStride(int axis) const {
+        return std::size_t(axis == 0 ? 1 : axis == 1 ? m_denseSize[0] : m_denseSize[0] * m_denseSize[1]);
+    }
     /// Whether the cells are in row order rather than Z order.
     bool rowOrder() const { return m_rowOrder; }
     /// The axis along which neighbouring cells follow each other in the sorted order where both hold points: in row
@@ -128,6 +139,9 @@ private:
     std::vector<std::uint64_t> m_tableKeys;  // open-addressing hash: sort key -> cell index
     std::vector<std::uint32_t> m_tableCells;
     int m_tableBits = 0;
+    // How many cells the dense table reaches past the occupied cells' bounding box: the cells around a cell within one
+    // of the box (mayHoldAround) lie within two.
+    static constexpr std::int64_t kDenseMargin = 2;
     // Dense lookup: cell index + 1 (0: empty) for every cell of the box [m_denseMin, m_denseMin + m_denseSize).
     std::vector<std::uint32_t> m_denseCells;
     std::array<std::int64_t, 3> m_denseMin{};

@@ -107,6 +107,21 @@ TEST(NeighbourSearch, DenseTableAndHashGiveTheSameLists) {
     }
 }
 
+TEST(NeighbourSearch, ADenseTargetFoundFromEveryCellAroundItsBox) {
+    // The cells around a query cell are read from the target's dense table without a test of bounds: queries from
+    // every side of a compact target, up to two cells past its box, must find what brute force finds.
+    const Real radius = 0.05;
+    const auto target = randomPoints(2000, Vec3(0, 0, 0), Vec3(0.3, 0.2, 0.25), 10);
+    const auto query = randomPoints(4000, Vec3(-0.12, -0.12, -0.12), Vec3(0.42, 0.32, 0.37), 11);
+    UniformGrid qg(radius), tg(radius);
+    qg.build(query);
+    tg.build(target);
+    ASSERT_TRUE(tg.dense());
+    NeighbourList nl;
+    findNeighbours(qg, query, tg, target, radius, false, nl);
+    expectSameAsBruteForce(nl, bruteForce(query, target, radius, false));
+}
+
 TEST(NeighbourSearch, EmptyInputs) {
     const NeighbourList empty = fluidSearch({}, 0.1);
     EXPECT_EQ(empty.particles(), 0u);
