@@ -145,9 +145,9 @@ TEST(PressureCoarseSpace, ComesBackFromItsSavedBytesAsItWas) {
     EXPECT_THROW(restored.restore(movedIn), std::runtime_error);
 }
 
-// The build's grid takes Z order or row order by how many particles it holds (UniformGrid::kSlabPoints), which the saved
-// cells do not say: 175,616 particles in 2,744 cells take Z order, where the cells' centres alone would take row order.
-// Such a checkpoint of a 1M-particle statue was refused as "out of order" before restore tried both orders.
+// The build's grid takes Z order or row order by how many particles it holds (UniformGrid::kSlabPoints), which the
+// saved cells do not say: 175,616 particles in 2,744 cells take Z order, where the cells' centres alone would take row
+// order. Such a checkpoint of a 1M-particle statue was refused as "out of order" before restore tried both orders.
 TEST(PressureCoarseSpace, ComesBackInTheOrderOfAGridOfManyParticles) {
     const PressurePairs big(56);
     PressureCoarseSpace built, restored;
